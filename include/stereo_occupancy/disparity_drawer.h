@@ -1,0 +1,93 @@
+#pragma once
+/// @file
+/// The core's entry point: draws one disparity image into a local grid with
+/// one of the paper's four algorithms, then blurs it.
+
+#include <Eigen/Geometry>
+#include <opencv2/core.hpp>
+
+#include <string>
+
+#include "stereo_occupancy/disparity_pyramid.h"
+#include "stereo_occupancy/draw_statistics.h"
+#include "stereo_occupancy/grid_blur.h"
+#include "stereo_occupancy/inverse_sensor_model.h"
+#include "stereo_occupancy/line_drawing.h"
+#include "stereo_occupancy/local_grid.h"
+#include "stereo_occupancy/ray_tracing.h"
+#include "stereo_occupancy/stereo_camera_model.h"
+
+namespace stereo_occupancy {
+
+/// The four ways of drawing a disparity image (sections V and VI).
+enum class DrawingAlgorithm {
+  kLine,             ///< "line": V-A, one line per valid pixel
+  kLinePyramid,      ///< "line_pyramid": VI-B, min-disparity pyramid
+  kRayTrace,         ///< "raytrace": V-B, one projection per cell
+  kRayTracePyramid,  ///< "raytrace_pyramid": VI-C, max-disparity pyramid
+};
+
+/// Name of an algorithm as used by parameters and the command line.
+const char* toString(DrawingAlgorithm algorithm);
+/// Parses "line", "line_pyramid", "raytrace" or "raytrace_pyramid".
+bool parseDrawingAlgorithm(const std::string& name, DrawingAlgorithm* algorithm);
+
+/// Everything about drawing that is not the camera.
+struct DrawingConfig {
+  DrawingAlgorithm algorithm = DrawingAlgorithm::kLinePyramid;
+  double resolution_m = 0.25;  ///< c, grid cell size [m]
+  InverseSensorModelConfig sensor_model;
+  BlurConfig blur;
+
+  bool isValid(std::string* why = nullptr) const;
+};
+
+/// True if T_W_C is finite with an orthonormal, right-handed rotation.
+bool isValidPose(const Eigen::Isometry3d& T_W_C);
+
+/// Draws disparity images of one camera set-up. Builds the lookup tables once;
+/// reuses its buffers between images. Not thread-safe: one per thread.
+class DisparityDrawer {
+ public:
+  /// @throws std::invalid_argument if a config is not valid.
+  DisparityDrawer(const StereoCameraConfig& camera, const DrawingConfig& config);
+
+  const StereoCameraModel& camera() const { return camera_; }
+  const DrawingConfig& config() const { return config_; }
+  const LogOddsTable& logOddsTable() const { return table_; }
+  const PyramidLevelTable& levelTable() const { return levels_; }
+
+  /// prepareGrid() + drawInto() + blur(): the whole path for one image.
+  /// @param disparity CV_32FC1, of the camera's size [px]; NaN or negative:
+  ///        invalid, 0: infinitely far.
+  /// @param T_W_C pose of the optical frame C in the world W.
+  /// @throws std::invalid_argument for a wrong image type or size, or a bad pose.
+  DrawStatistics draw(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C, LocalGrid* grid);
+
+  /// Shapes @p grid to the frustum's bounding box (padded for the blur) and clears it.
+  void prepareGrid(const Eigen::Isometry3d& T_W_C, LocalGrid* grid) const;
+
+  /// Draws into a grid that prepareGrid() shaped for the same pose.
+  DrawStatistics drawInto(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C, LocalGrid* grid);
+
+  /// Eq. 17 blur around the camera centre; a no-op when the blur is off.
+  void blur(const Eigen::Isometry3d& T_W_C, LocalGrid* grid);
+
+  /// The pyramid built for the last pyramidal drawing (for inspection and tests).
+  const DisparityPyramid& pyramid() const { return pyramid_; }
+
+ private:
+  void checkInput(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C) const;
+
+  StereoCameraModel camera_;
+  DrawingConfig config_;
+  InverseSensorModel model_;
+  LogOddsTable table_;
+  PyramidLevelTable levels_;
+  LineDrawer line_drawer_;
+  RayTracer ray_tracer_;
+  DisparityPyramid pyramid_;
+  DistanceDependentBlur blur_;
+};
+
+}  // namespace stereo_occupancy

@@ -1,0 +1,105 @@
+#pragma once
+/// @file
+/// Disparity image pyramids (Andert 2009, section VI): min-disparity pyramid
+/// for line drawing (eq. 14), max-disparity pyramid for ray tracing (eq. 16),
+/// enlarged levels i < 0 (eq. 15), and the level choice of eqs. 12-13.
+
+#include <opencv2/core.hpp>
+
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "stereo_occupancy/stereo_camera_model.h"
+
+namespace stereo_occupancy {
+
+/// Which reduction builds level i+1 from level i.
+enum class PyramidType {
+  kMinDisparity,  ///< eq. 14: keeps the farthest point of each block (line drawing)
+  kMaxDisparity,  ///< eq. 16: keeps the nearest point of each block (ray tracing)
+};
+
+/// A pyramid of sanitised disparity images d_i, i = 0 .. topLevel().
+///
+/// Level 0 is the input with invalid pixels replaced by a value that the
+/// pyramid's reduction ignores: +inf for the min pyramid, -1 for the max
+/// pyramid. Zero (infinitely far) and valid disparities are kept as they are.
+/// Level i+1 has ceil(w_i / 2) x ceil(h_i / 2) pixels; a block at the right or
+/// bottom edge reduces only the pixels that exist. Levels i < 0 are not stored:
+/// at() reads them through eq. 15.
+class DisparityPyramid {
+ public:
+  static constexpr float kInvalidMin = std::numeric_limits<float>::infinity();
+  static constexpr float kInvalidMax = -1.0f;
+
+  /// Builds levels 0..top_level from a CV_32FC1 disparity image [px].
+  void build(const cv::Mat& disparity, const StereoCameraModel& camera, PyramidType type, int top_level);
+
+  PyramidType type() const { return type_; }
+  int topLevel() const { return static_cast<int>(levels_.size()) - 1; }
+  /// Value that marks a pixel without information in this pyramid.
+  float invalidValue() const { return type_ == PyramidType::kMinDisparity ? kInvalidMin : kInvalidMax; }
+
+  /// Stored level i, 0 <= i <= topLevel().
+  const cv::Mat& level(int i) const { return levels_[i]; }
+
+  /// Width and height of level i; for i < 0 the size of level 0 times 2^-i.
+  int width(int i) const { return i >= 0 ? levels_[i].cols : levels_[0].cols << -i; }
+  int height(int i) const { return i >= 0 ? levels_[i].rows : levels_[0].rows << -i; }
+
+  /// d_i(x, y) for any level; for i < 0, d_i(x, y) = d_0(x >> -i, y >> -i) (eq. 15).
+  float at(int i, int x, int y) const {
+    if (i >= 0) return levels_[i].ptr<float>(y)[x];
+    return levels_[0].ptr<float>(y >> -i)[x >> -i];
+  }
+
+  /// Image x coordinate (level 0 pixels) of the centre of pixel x at level i.
+  static double centreOf(int i, int x) { return std::ldexp(x + 0.5, i) - 0.5; }
+
+ private:
+  PyramidType type_ = PyramidType::kMinDisparity;
+  std::vector<cv::Mat> levels_;
+};
+
+/// Pyramid level per disparity (eqs. 12-13) for a grid of cell size c.
+///
+/// Neighbouring pixels of level i lie Δp = z·2^i/f apart (eq. 12); the level
+/// drawn is the one with 0.5·c < Δp <= c (eq. 13), i.e.
+/// i(d) = floor(log2(c·d / b)). Disparities below the far disparity of the
+/// maximum range (including 0, infinitely far) use the level of the maximum
+/// range, since their rays are drawn as free space up to it.
+class PyramidLevelTable {
+ public:
+  PyramidLevelTable(const StereoCameraModel& camera, double cell_size_m);
+
+  /// Level for disparity d [px], clamped to [minLevel(), topLevel()].
+  int levelForDisparity(float d_px) const {
+    const float d = d_px > far_disparity_ ? d_px : far_disparity_;
+    const int i = std::ilogb(d * c_over_b_);  // floor(log2(c·d/b)) by the float's exponent
+    return i < min_level_ ? min_level_ : (i > top_level_ ? top_level_ : i);
+  }
+
+  /// Level for a depth z [m] (eq. 13 with d = bf/z), clamped likewise.
+  int levelForDepth(double z_m) const;
+
+  /// Lowest level used: min(0, level of the maximum range); < 0 means eq. 15 enlargements.
+  int minLevel() const { return min_level_; }
+  /// Highest level worth building: that of the nearest valid disparity, at
+  /// most the level where the image shrinks to one pixel.
+  int topLevel() const { return top_level_; }
+
+  /// Unclamped eq. 13 level of disparity d > 0.
+  static int rawLevel(double d_px, double cell_size_m, double baseline_m) {
+    return std::ilogb(d_px * cell_size_m / baseline_m);
+  }
+
+ private:
+  float c_over_b_;
+  float far_disparity_;
+  int min_level_;
+  int top_level_;
+  double cell_f_px_m_;  ///< c·f
+};
+
+}  // namespace stereo_occupancy

@@ -1,0 +1,147 @@
+#pragma once
+/// @file
+/// Inverse sensor model of one disparity pixel in log-odds (Andert 2009,
+/// section IV, eqs. 8-11) and the lookup table that serves it to the drawing
+/// algorithms.
+
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+
+namespace stereo_occupancy {
+
+/// Parameters of eqs. 9-10 plus the clamp that keeps eq. 9 a probability.
+struct InverseSensorModelConfig {
+  double k_m = 0.1;     ///< k, significance of one measurement [m] (eq. 9)
+  double p_min = 0.35;  ///< occupancy probability of free space in front of a measurement (eq. 10)
+  /// Cap on the peak probability P(l_p). Eq. 9 peaks at 0.5 + k/(Δl√(2π)),
+  /// which reaches 1 for Δl <= k·2/√(2π) (below ~5.8 m with the paper's
+  /// camera). The peak amplitude is capped at p_max, so the Gaussian keeps its
+  /// shape and P stays in [p_min, p_max] ⊂ (0, 1) for every range.
+  double p_max = 0.9;
+
+  bool isValid(std::string* why = nullptr) const;
+  bool operator==(const InverseSensorModelConfig& o) const {
+    return k_m == o.k_m && p_min == o.p_min && p_max == o.p_max;
+  }
+};
+
+/// Exact evaluation of the model; the drawing algorithms use LogOddsTable.
+class InverseSensorModel {
+ public:
+  explicit InverseSensorModel(const InverseSensorModelConfig& config) : config_(config) {}
+
+  const InverseSensorModelConfig& config() const { return config_; }
+
+  /// P_occ(l) of eq. 10: p_min in front of the measurement, 0.5 behind.
+  double occupancyPrior(double l_m, double l_p_m) const { return l_m <= l_p_m ? config_.p_min : 0.5; }
+
+  /// Peak probability at l = l_p: 0.5 + k / (Δl √(2π)) (eq. 9), capped at p_max.
+  double peakProbability(double delta_l_m) const;
+
+  /// P(s(l)) of eq. 9 for a measurement at range l_p with uncertainty Δl.
+  double probability(double l_m, double l_p_m, double delta_l_m) const;
+
+  /// L(s(l)) = ln(P / (1 - P)) (eq. 8).
+  double logOdds(double l_m, double l_p_m, double delta_l_m) const;
+
+  /// L̂(s(l)) of eq. 11: the maximum of L over the cell-wide window
+  /// [l - c/2, l + c/2]. P is unimodal in l with its mode at l_p (it rises
+  /// from p_min to the peak in front and falls to 0.5 behind), so the maximum
+  /// is L at the window point nearest to l_p; this is exact, and
+  /// logOddsHatSampled() is the paper's dense-sampling approximation of it.
+  double logOddsHat(double l_m, double l_p_m, double delta_l_m, double cell_size_m) const;
+
+  /// Eq. 11 by dense sampling of the window with @p samples points.
+  double logOddsHatSampled(double l_m, double l_p_m, double delta_l_m, double cell_size_m,
+                           int samples = 10001) const;
+
+  /// Log-odds of free space, ln(p_min / (1 - p_min)).
+  double freeLogOdds() const { return std::log(config_.p_min / (1.0 - config_.p_min)); }
+
+ private:
+  InverseSensorModelConfig config_;
+};
+
+/// L̂ along one ray, as served by LogOddsTable: a view into two table rows.
+/// Cheap to copy; valid while the table lives.
+struct RangeProfile {
+  const float* row = nullptr;  ///< row of the peak probability just below this measurement's
+  int row_length = 0;          ///< offset to the next row (just above)
+  float row_weight = 0.0f;     ///< interpolation weight of the next row
+  float l_p_m = std::numeric_limits<float>::infinity();  ///< measured range (inf: free to max range)
+  float samples_per_m = 0.0f;                            ///< table samples per metre of offset
+  float half_cell_m = 0.0f;
+  float front_m = 0.0f;       ///< offsets u = l - l_p below this are plain free space
+  float row_origin_m = 0.0f;  ///< offset e (window removed) of a row's first sample
+  float tail_m = 0.0f;        ///< offsets above this carry no information (not drawn)
+  float free_log_odds = 0.0f;
+
+  /// Range up to which a line must be drawn [m].
+  float endRange() const { return l_p_m + tail_m; }
+
+  /// L̂ at range l [m]; requires l - l_p <= tail_m.
+  float at(float l_m) const {
+    const float u = l_m - l_p_m;
+    if (!(u >= front_m)) return free_log_odds;  // also for l_p = inf
+    // Eq. 11: the cell-wide window around l reaches to the point nearest l_p.
+    const float e = u > half_cell_m ? u - half_cell_m : (u < -half_cell_m ? u + half_cell_m : 0.0f);
+    const float x = (e - row_origin_m) * samples_per_m;
+    const int j = static_cast<int>(x);
+    const float frac = x - static_cast<float>(j);
+    const float* r0 = row + j;
+    const float* r1 = r0 + row_length;
+    const float v0 = r0[0] + frac * (r0[1] - r0[0]);
+    const float v1 = r1[0] + frac * (r1[1] - r1[0]);
+    return v0 + row_weight * (v1 - v0);
+  }
+};
+
+/// Lookup table of eq. 11, built once per (model, cell size) set-up.
+///
+/// L̂ depends on the offset u = l - l_p, on Δl and on c. Removing the
+/// cell-wide window from u (eq. 11, see InverseSensorModel::logOddsHat) leaves
+/// e; in units of Δl, L(e) depends only on the peak probability
+/// A = min(0.5 + k/(Δl√2π), p_max). The table has kPeakRows rows evenly spaced
+/// in A from 0.5 to p_max, each sampling L from e = -kFrontSigmas·Δl to
+/// +kTailSigmas·Δl with kSamplesPerSigma samples per Δl; look-ups interpolate
+/// bilinearly. Beyond the front the value is the free-space log-odds; beyond
+/// the tail (P - 0.5 < 1.1 % of the peak height) cells are left untouched.
+class LogOddsTable {
+ public:
+  static constexpr float kFrontSigmas = 4.0f;
+  static constexpr float kTailSigmas = 3.0f;
+  static constexpr int kSamplesPerSigma = 32;
+  static constexpr int kPeakRows = 41;
+
+  LogOddsTable(const InverseSensorModel& model, double cell_size_m);
+
+  /// Profile of a measurement at range l_p with uncertainty Δl > 0 [m].
+  RangeProfile profile(float l_p_m, float delta_l_m) const;
+
+  /// Profile of a zero-disparity pixel: free space along the whole ray.
+  RangeProfile freeProfile() const;
+
+  double cellSize() const { return cell_size_m_; }
+  float freeLogOdds() const { return free_log_odds_; }
+
+ private:
+  double cell_size_m_;
+  float k_over_sqrt_2pi_;
+  float peak_max_;        ///< p_max - 0.5
+  float rows_per_peak_;   ///< (kPeakRows - 1) / (p_max - 0.5)
+  int row_length_;
+  float free_log_odds_;
+  std::vector<float> values_;
+};
+
+class StereoCameraModel;
+
+/// The profile of L̂ along the ray of the pixel at image position (x, y) with
+/// disparity d > 0, or free space up to the maximum range for d = 0
+/// (eqs. 1, 2, 4, 6, 7).
+RangeProfile pixelProfile(const StereoCameraModel& camera, const LogOddsTable& table, double x_px, double y_px,
+                          float d_px);
+
+}  // namespace stereo_occupancy

@@ -1,0 +1,83 @@
+#pragma once
+/// @file
+/// The world-aligned local occupancy grid one disparity image is drawn into.
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "stereo_occupancy/stereo_camera_model.h"
+
+namespace stereo_occupancy {
+
+/// Dense 3D array of log-odds over an axis-aligned box of the world frame W.
+///
+/// Cell (i, j, k) of the global grid of cell size c spans
+/// [i·c, (i+1)·c) x [j·c, (j+1)·c) x [k·c, (k+1)·c); its centre is
+/// ((i, j, k) + 0.5)·c. This is exactly the cell of an octomap::OcTree key at
+/// the same resolution (key = global index + 2^15). The local grid holds the
+/// global cells originIndex() .. originIndex() + size() - 1, x fastest.
+/// Cells nothing was drawn into hold kUnknown (-inf), so that obstacle priority
+/// is a plain max().
+class LocalGrid {
+ public:
+  static constexpr float kUnknown = -std::numeric_limits<float>::infinity();
+
+  /// Re-shapes the grid and marks every cell unknown. Keeps its memory.
+  void reset(const Eigen::Vector3i& origin_index, const Eigen::Vector3i& size, double resolution_m);
+
+  /// Marks every cell unknown.
+  void clear();
+
+  double resolution() const { return resolution_m_; }
+  const Eigen::Vector3i& originIndex() const { return origin_index_; }
+  const Eigen::Vector3i& size() const { return size_; }
+  size_t numCells() const { return data_.size(); }
+
+  /// Position of the grid's lower corner in W [m].
+  Eigen::Vector3d originPosition() const { return origin_index_.cast<double>() * resolution_m_; }
+
+  size_t linearIndex(int x, int y, int z) const {
+    return static_cast<size_t>(x) + static_cast<size_t>(size_.x()) * (static_cast<size_t>(y) + static_cast<size_t>(size_.y()) * z);
+  }
+  bool contains(const Eigen::Vector3i& local) const {
+    return (local.array() >= 0).all() && (local.array() < size_.array()).all();
+  }
+  float& at(int x, int y, int z) { return data_[linearIndex(x, y, z)]; }
+  float at(int x, int y, int z) const { return data_[linearIndex(x, y, z)]; }
+  float* data() { return data_.data(); }
+  const float* data() const { return data_.data(); }
+
+  /// Centre of local cell (x, y, z) in W [m].
+  Eigen::Vector3d cellCentre(int x, int y, int z) const {
+    return (origin_index_ + Eigen::Vector3i(x, y, z)).cast<double>().array().operator+(0.5).matrix() * resolution_m_;
+  }
+
+  /// Global index of the cell containing W_point: floor(p / c).
+  static Eigen::Vector3i globalIndex(const Eigen::Vector3d& W_point, double resolution_m) {
+    return (W_point / resolution_m).array().floor().cast<int>().matrix();
+  }
+
+  /// Number of cells that are not kUnknown.
+  size_t countKnown() const;
+
+ private:
+  Eigen::Vector3i origin_index_ = Eigen::Vector3i::Zero();
+  Eigen::Vector3i size_ = Eigen::Vector3i::Zero();
+  double resolution_m_ = 1.0;
+  std::vector<float> data_;
+};
+
+/// Axis-aligned bounding box in W of the view frustum cut at the maximum range
+/// (the camera centre, the four corner rays and the spherical cap at
+/// max_range_m, including where the cap bulges past the corners).
+Eigen::AlignedBox3d frustumBoundingBox(const StereoCameraModel& camera, const Eigen::Isometry3d& T_W_C);
+
+/// Shapes @p grid to the cells covering @p box, plus @p padding_cells on every side.
+void fitGridToBox(const Eigen::AlignedBox3d& box, double resolution_m, int padding_cells, LocalGrid* grid);
+
+}  // namespace stereo_occupancy

@@ -1,0 +1,52 @@
+#pragma once
+/// @file
+/// Analytic scenes ray-cast into ideal disparity images: test and benchmark
+/// input with a known ground truth.
+
+#include <Eigen/Geometry>
+#include <opencv2/core.hpp>
+
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "stereo_occupancy/stereo_camera_model.h"
+
+namespace stereo_occupancy {
+
+/// A scene in the world frame W: axis-aligned boxes and an optional ground
+/// plane z = ground_height_m (REP-103: z up).
+struct SyntheticScene {
+  std::vector<Eigen::AlignedBox3d> boxes;
+  std::optional<double> ground_height_m;
+
+  /// Range along the unit ray W_dir from W_origin to the first surface, +inf if none.
+  double castRay(const Eigen::Vector3d& W_origin, const Eigen::Vector3d& W_dir) const;
+  /// True if W_point lies inside a box or below the ground.
+  bool isInside(const Eigen::Vector3d& W_point) const;
+};
+
+/// Renders the exact disparity of @p scene seen from T_W_C: bf/z of the first
+/// surface hit through each pixel centre, 0 where no surface is hit (sky).
+cv::Mat renderDisparity(const SyntheticScene& scene, const StereoCameraModel& camera, const Eigen::Isometry3d& T_W_C);
+
+/// Marks pixels invalid (NaN), like an unmatched stereo pixel: each pixel with
+/// probability @p fraction, drawn from a fixed-seed generator.
+void addInvalidSpeckle(cv::Mat* disparity, double fraction, uint32_t seed);
+
+/// Pose of an optical frame at W_position looking along W +x, horizon level
+/// (optical x = -W y, optical y = -W z), turned by yaw about W z [rad] and
+/// pitched down by pitch [rad].
+Eigen::Isometry3d lookingAlongX(const Eigen::Vector3d& W_position, double yaw_rad = 0.0, double pitch_down_rad = 0.0);
+
+/// The Table I test scene, after the paper's Fig. 6: a camera 2 m above a
+/// ground plane looking level along +x at posts and boxes between 5 and
+/// 25 m; sky above. Pose in @p T_W_C.
+SyntheticScene table1Scene(Eigen::Isometry3d* T_W_C);
+
+/// The Table I test image: table1Scene() rendered by the paper's camera
+/// (640x480, f = 700 px, b = 0.3 m), with 3 % invalid speckle and a
+/// texture-less (invalid) patch.
+cv::Mat table1Image(const StereoCameraModel& camera, Eigen::Isometry3d* T_W_C);
+
+}  // namespace stereo_occupancy

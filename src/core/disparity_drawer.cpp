@@ -1,0 +1,115 @@
+#include "stereo_occupancy/disparity_drawer.h"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace stereo_occupancy {
+
+namespace {
+
+StereoCameraConfig checked(const StereoCameraConfig& camera, const DrawingConfig& config) {
+  std::string why;
+  if (!camera.isValid(&why)) throw std::invalid_argument("camera: " + why);
+  if (!config.isValid(&why)) throw std::invalid_argument("drawing: " + why);
+  return camera;
+}
+
+}  // namespace
+
+const char* toString(DrawingAlgorithm algorithm) {
+  switch (algorithm) {
+    case DrawingAlgorithm::kLine:
+      return "line";
+    case DrawingAlgorithm::kLinePyramid:
+      return "line_pyramid";
+    case DrawingAlgorithm::kRayTrace:
+      return "raytrace";
+    case DrawingAlgorithm::kRayTracePyramid:
+      return "raytrace_pyramid";
+  }
+  return "?";
+}
+
+bool parseDrawingAlgorithm(const std::string& name, DrawingAlgorithm* algorithm) {
+  for (DrawingAlgorithm a : {DrawingAlgorithm::kLine, DrawingAlgorithm::kLinePyramid, DrawingAlgorithm::kRayTrace,
+                             DrawingAlgorithm::kRayTracePyramid}) {
+    if (name == toString(a)) {
+      *algorithm = a;
+      return true;
+    }
+  }
+  return false;
+}
+
+bool DrawingConfig::isValid(std::string* why) const {
+  if (!(std::isfinite(resolution_m) && resolution_m >= 0.01 && resolution_m <= 10.0)) {
+    if (why) *why = "resolution_m must be in [0.01, 10]";
+    return false;
+  }
+  return sensor_model.isValid(why) && blur.isValid(why);
+}
+
+bool isValidPose(const Eigen::Isometry3d& T_W_C) {
+  if (!T_W_C.matrix().allFinite()) return false;
+  const Eigen::Matrix3d R = T_W_C.linear();
+  return (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() < 1e-6 && R.determinant() > 0.0;
+}
+
+DisparityDrawer::DisparityDrawer(const StereoCameraConfig& camera, const DrawingConfig& config)
+    : camera_(checked(camera, config)),
+      config_(config),
+      model_(config.sensor_model),
+      table_(model_, config.resolution_m),
+      levels_(camera_, config.resolution_m),
+      line_drawer_(camera_, table_, levels_),
+      ray_tracer_(camera_, table_, levels_),
+      blur_(config.blur) {}
+
+void DisparityDrawer::checkInput(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C) const {
+  if (disparity.type() != CV_32FC1) throw std::invalid_argument("disparity image must be CV_32FC1");
+  if (disparity.cols != camera_.config().width_px || disparity.rows != camera_.config().height_px)
+    throw std::invalid_argument("disparity image size differs from the camera's");
+  if (!isValidPose(T_W_C)) throw std::invalid_argument("camera pose is not finite or not a rotation");
+}
+
+void DisparityDrawer::prepareGrid(const Eigen::Isometry3d& T_W_C, LocalGrid* grid) const {
+  const int padding = blur_.paddingCells(camera_.config().max_range_m, config_.resolution_m);
+  fitGridToBox(frustumBoundingBox(camera_, T_W_C), config_.resolution_m, padding, grid);
+}
+
+DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C,
+                                         LocalGrid* grid) {
+  checkInput(disparity, T_W_C);
+  DrawStatistics stats;
+  switch (config_.algorithm) {
+    case DrawingAlgorithm::kLine:
+      line_drawer_.drawImage(disparity, T_W_C, grid, &stats);
+      break;
+    case DrawingAlgorithm::kLinePyramid:
+      pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel());
+      line_drawer_.drawPyramid(pyramid_, T_W_C, grid, &stats);
+      break;
+    case DrawingAlgorithm::kRayTrace:
+      pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, 0);
+      ray_tracer_.drawImage(pyramid_, T_W_C, grid, &stats);
+      break;
+    case DrawingAlgorithm::kRayTracePyramid:
+      pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel());
+      ray_tracer_.drawPyramid(pyramid_, T_W_C, grid, &stats);
+      break;
+  }
+  stats.different_grid_cells = grid->countKnown();
+  return stats;
+}
+
+void DisparityDrawer::blur(const Eigen::Isometry3d& T_W_C, LocalGrid* grid) { blur_.apply(T_W_C.translation(), grid); }
+
+DrawStatistics DisparityDrawer::draw(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C, LocalGrid* grid) {
+  checkInput(disparity, T_W_C);
+  prepareGrid(T_W_C, grid);
+  const DrawStatistics stats = drawInto(disparity, T_W_C, grid);
+  blur(T_W_C, grid);
+  return stats;
+}
+
+}  // namespace stereo_occupancy

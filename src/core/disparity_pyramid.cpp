@@ -1,0 +1,67 @@
+#include "stereo_occupancy/disparity_pyramid.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace stereo_occupancy {
+
+void DisparityPyramid::build(const cv::Mat& disparity, const StereoCameraModel& camera, PyramidType type,
+                             int top_level) {
+  CV_Assert(disparity.type() == CV_32FC1);
+  type_ = type;
+  const float invalid = invalidValue();
+  top_level = std::max(top_level, 0);
+  levels_.resize(top_level + 1);
+
+  // Level 0: sanitise. NaN, negative and out-of-range values carry no information.
+  cv::Mat& d0 = levels_[0];
+  d0.create(disparity.rows, disparity.cols, CV_32FC1);
+  for (int y = 0; y < disparity.rows; ++y) {
+    const float* in = disparity.ptr<float>(y);
+    float* out = d0.ptr<float>(y);
+    for (int x = 0; x < disparity.cols; ++x) out[x] = camera.isValidDisparity(in[x]) ? in[x] : invalid;
+  }
+
+  for (int i = 1; i <= top_level; ++i) {
+    const cv::Mat& src = levels_[i - 1];
+    cv::Mat& dst = levels_[i];
+    const int w = (src.cols + 1) / 2;
+    const int h = (src.rows + 1) / 2;
+    dst.create(h, w, CV_32FC1);
+    for (int y = 0; y < h; ++y) {
+      const float* r0 = src.ptr<float>(2 * y);
+      const float* r1 = 2 * y + 1 < src.rows ? src.ptr<float>(2 * y + 1) : r0;
+      float* out = dst.ptr<float>(y);
+      for (int x = 0; x < w; ++x) {
+        const int x0 = 2 * x;
+        const int x1 = x0 + 1 < src.cols ? x0 + 1 : x0;
+        if (type == PyramidType::kMinDisparity) {  // eq. 14
+          out[x] = std::min(std::min(r0[x0], r0[x1]), std::min(r1[x0], r1[x1]));
+        } else {  // eq. 16
+          out[x] = std::max(std::max(r0[x0], r0[x1]), std::max(r1[x0], r1[x1]));
+        }
+      }
+    }
+  }
+}
+
+PyramidLevelTable::PyramidLevelTable(const StereoCameraModel& camera, double cell_size_m)
+    : c_over_b_(static_cast<float>(cell_size_m / camera.config().baseline_m)),
+      far_disparity_(static_cast<float>(camera.farDisparity())),
+      cell_f_px_m_(cell_size_m * camera.config().focal_length_px) {
+  min_level_ = std::min(0, std::ilogb(far_disparity_ * c_over_b_));
+  const int size_limit =
+      std::ilogb(static_cast<double>(std::max(camera.config().width_px, camera.config().height_px)));
+  const double near = camera.nearDisparity();
+  const int near_level = std::isfinite(near) ? std::ilogb(near * cell_size_m / camera.config().baseline_m)
+                                             : size_limit;
+  top_level_ = std::max(0, std::min(near_level, size_limit));
+}
+
+int PyramidLevelTable::levelForDepth(double z_m) const {
+  if (!(z_m > 0.0)) return top_level_;
+  const int i = std::ilogb(cell_f_px_m_ / z_m);  // eq. 13 with d = bf/z: floor(log2(c·f/z))
+  return std::clamp(i, min_level_, top_level_);
+}
+
+}  // namespace stereo_occupancy

@@ -1,0 +1,114 @@
+#include "stereo_occupancy/inverse_sensor_model.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "stereo_occupancy/stereo_camera_model.h"
+
+namespace stereo_occupancy {
+
+namespace {
+constexpr double kSqrt2Pi = 2.5066282746310002;
+}
+
+bool InverseSensorModelConfig::isValid(std::string* why) const {
+  auto fail = [why](const char* text) {
+    if (why) *why = text;
+    return false;
+  };
+  if (!(std::isfinite(k_m) && k_m > 0.0)) return fail("k_m must be finite and > 0");
+  if (!(p_min > 0.0 && p_min < 0.5)) return fail("p_min must be in (0, 0.5)");
+  if (!(p_max > 0.5 && p_max < 1.0)) return fail("p_max must be in (0.5, 1)");
+  return true;
+}
+
+double InverseSensorModel::peakProbability(double delta_l_m) const {
+  return std::min(0.5 + config_.k_m / (delta_l_m * kSqrt2Pi), config_.p_max);
+}
+
+double InverseSensorModel::probability(double l_m, double l_p_m, double delta_l_m) const {
+  const double p_occ = occupancyPrior(l_m, l_p_m);  // eq. 10
+  const double s = (l_m - l_p_m) / delta_l_m;
+  // Eq. 9, with the amplitude k/(Δl√2π) + 0.5 capped at p_max.
+  return p_occ + (peakProbability(delta_l_m) - p_occ) * std::exp(-0.5 * s * s);
+}
+
+double InverseSensorModel::logOdds(double l_m, double l_p_m, double delta_l_m) const {
+  const double p = probability(l_m, l_p_m, delta_l_m);
+  return std::log(p / (1.0 - p));  // eq. 8
+}
+
+double InverseSensorModel::logOddsHat(double l_m, double l_p_m, double delta_l_m, double cell_size_m) const {
+  // Eq. 11: max over [l - c/2, l + c/2]; P is unimodal with its mode at l_p.
+  const double nearest = std::clamp(l_p_m, l_m - 0.5 * cell_size_m, l_m + 0.5 * cell_size_m);
+  return logOdds(nearest, l_p_m, delta_l_m);
+}
+
+double InverseSensorModel::logOddsHatSampled(double l_m, double l_p_m, double delta_l_m, double cell_size_m,
+                                             int samples) const {
+  double best = -std::numeric_limits<double>::infinity();
+  for (int i = 0; i < samples; ++i) {
+    const double l = l_m - 0.5 * cell_size_m + cell_size_m * i / (samples - 1);
+    best = std::max(best, logOdds(l, l_p_m, delta_l_m));
+  }
+  return best;
+}
+
+LogOddsTable::LogOddsTable(const InverseSensorModel& model, double cell_size_m) : cell_size_m_(cell_size_m) {
+  const auto& cfg = model.config();
+  k_over_sqrt_2pi_ = static_cast<float>(cfg.k_m / kSqrt2Pi);
+  peak_max_ = static_cast<float>(cfg.p_max - 0.5);
+  rows_per_peak_ = static_cast<float>((kPeakRows - 1) / (cfg.p_max - 0.5));
+  const int samples = static_cast<int>((kFrontSigmas + kTailSigmas) * kSamplesPerSigma);
+  row_length_ = samples + 2;  // one sample of padding for the interpolation at the tail
+  free_log_odds_ = static_cast<float>(model.freeLogOdds());
+  // One extra row so that the row above the last one exists for the interpolation.
+  values_.resize(static_cast<size_t>(kPeakRows + 1) * row_length_);
+  for (int r = 0; r <= kPeakRows; ++r) {
+    const double peak = 0.5 + std::min(r, kPeakRows - 1) * (cfg.p_max - 0.5) / (kPeakRows - 1);
+    float* row = &values_[static_cast<size_t>(r) * row_length_];
+    for (int j = 0; j < row_length_; ++j) {
+      const double t = -kFrontSigmas + static_cast<double>(j) / kSamplesPerSigma;  // e / Δl
+      const double p_occ = t <= 0.0 ? cfg.p_min : 0.5;                             // eq. 10
+      const double p = p_occ + (peak - p_occ) * std::exp(-0.5 * t * t);           // eq. 9
+      row[j] = static_cast<float>(std::log(p / (1.0 - p)));                        // eq. 8
+    }
+  }
+}
+
+RangeProfile LogOddsTable::profile(float l_p_m, float delta_l_m) const {
+  RangeProfile p;
+  // Height of the peak above 0.5 (eq. 9), capped at p_max - 0.5.
+  const float height = std::min(k_over_sqrt_2pi_ / delta_l_m, peak_max_);
+  const float x = height * rows_per_peak_;
+  const int r = std::min(static_cast<int>(x), kPeakRows - 1);
+  p.row = &values_[static_cast<size_t>(r) * row_length_];
+  p.row_length = row_length_;
+  p.row_weight = x - static_cast<float>(r);
+  p.l_p_m = l_p_m;
+  p.samples_per_m = kSamplesPerSigma / delta_l_m;
+  p.half_cell_m = static_cast<float>(0.5 * cell_size_m_);
+  p.front_m = -p.half_cell_m - kFrontSigmas * delta_l_m;
+  p.row_origin_m = -kFrontSigmas * delta_l_m;
+  p.tail_m = p.half_cell_m + kTailSigmas * delta_l_m;
+  p.free_log_odds = free_log_odds_;
+  return p;
+}
+
+RangeProfile LogOddsTable::freeProfile() const {
+  RangeProfile p = profile(std::numeric_limits<float>::infinity(), 1.0f);
+  p.tail_m = 0.0f;
+  return p;
+}
+
+RangeProfile pixelProfile(const StereoCameraModel& camera, const LogOddsTable& table, double x_px, double y_px,
+                          float d_px) {
+  if (!(d_px > 0.0f)) return table.freeProfile();  // zero disparity: infinitely far
+  const double z = camera.depthFromDisparity(d_px);              // eq. 1
+  const double n = camera.rayThroughPixel(x_px, y_px).norm();    // |p_c| / z_c (eq. 2)
+  const double l_p = z * n;                                      // eq. 6
+  const double delta_l = camera.rangeUncertainty(z, l_p);        // eqs. 4, 7
+  return table.profile(static_cast<float>(l_p), static_cast<float>(delta_l));
+}
+
+}  // namespace stereo_occupancy

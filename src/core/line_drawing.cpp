@@ -1,0 +1,131 @@
+#include "stereo_occupancy/line_drawing.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace stereo_occupancy {
+
+LineDrawer::LineDrawer(const StereoCameraModel& camera, const LogOddsTable& table, const PyramidLevelTable& levels)
+    : camera_(camera), table_(table), levels_(levels) {}
+
+uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vector3d& W_dir,
+                             const RangeProfile& profile, LocalGrid* grid) const {
+  const double c = grid->resolution();
+  const double inv_c = 1.0 / c;
+  const double l_end = std::min<double>(profile.endRange(), camera_.config().max_range_m);
+  if (!(l_end > 0.0)) return 0;
+
+  // Cell units relative to the grid's lower corner. One cell per slab of the
+  // major axis (a 3D Bresenham line); in each slab the cell is the one where
+  // the ray crosses the slab's centre plane, and l is the ray's range there.
+  const Eigen::Vector3d g0 = (W_origin - grid->originPosition()) * inv_c;
+  const double t_end = l_end * inv_c;
+  int m = 0;
+  W_dir.cwiseAbs().maxCoeff(&m);
+  const int a = (m + 1) % 3;
+  const int b = (m + 2) % 3;
+  const int k0 = static_cast<int>(std::floor(g0[m]));
+  const int k1 = static_cast<int>(std::floor(g0[m] + W_dir[m] * t_end));
+  const int step = W_dir[m] > 0.0 ? 1 : -1;
+  const int n = std::abs(k1 - k0) + 1;
+  const double dt = 1.0 / std::abs(W_dir[m]);
+  const double t0 = (k0 + 0.5 - g0[m]) / W_dir[m];  // |t0| <= dt / 2
+
+  const Eigen::Vector3i& size = grid->size();
+  const int64_t stride[3] = {1, size.x(), static_cast<int64_t>(size.x()) * size.y()};
+  const int na = size[a] - 1, nb = size[b] - 1, nm = size[m] - 1;
+  float* data = grid->data();
+  auto put = [&](int64_t idx, float value) {
+    float& cell = data[idx];
+    cell = std::max(cell, value);  // obstacle priority (section V-A, step 2b)
+  };
+  // The first and the last slab are only partly on the segment: sample the
+  // segment point nearest to the centre plane.
+  auto endCell = [&](int km, double t) {
+    t = std::clamp(t, 0.0, t_end);
+    const int ka = std::clamp(static_cast<int>(std::floor(g0[a] + W_dir[a] * t)), 0, na);
+    const int kb = std::clamp(static_cast<int>(std::floor(g0[b] + W_dir[b] * t)), 0, nb);
+    put(std::clamp(km, 0, nm) * stride[m] + ka * stride[a] + kb * stride[b], profile.at(static_cast<float>(t * c)));
+  };
+  endCell(k0, t0);
+  if (n == 1) return 1;
+
+  // Inner slabs: 0 < t < t_end; the segment lies inside the grid's box, so
+  // truncation is floor (the clamps only guard rounding at the box's faces).
+  float t = static_cast<float>(t0 + dt);
+  float pa = static_cast<float>(g0[a] + W_dir[a] * (t0 + dt));
+  float pb = static_cast<float>(g0[b] + W_dir[b] * (t0 + dt));
+  const float dta = static_cast<float>(W_dir[a] * dt), dtb = static_cast<float>(W_dir[b] * dt);
+  const float dtf = static_cast<float>(dt), cf = static_cast<float>(c);
+  int64_t idx_m = static_cast<int64_t>(k0 + step) * stride[m];
+  const int64_t didx_m = step * stride[m];
+  const int64_t sa = stride[a], sb = stride[b];
+  // Free space up to the measurement's front: one value for all these cells.
+  const float free_until = (profile.l_p_m + profile.front_m) * static_cast<float>(inv_c);
+  int k = 1;
+  for (; k < n - 1 && t < free_until; ++k, t += dtf, pa += dta, pb += dtb, idx_m += didx_m) {
+    const int ka = std::min(std::max(static_cast<int>(pa), 0), na);
+    const int kb = std::min(std::max(static_cast<int>(pb), 0), nb);
+    put(idx_m + ka * sa + kb * sb, profile.free_log_odds);
+  }
+  for (; k < n - 1; ++k, t += dtf, pa += dta, pb += dtb, idx_m += didx_m) {
+    const int ka = std::min(std::max(static_cast<int>(pa), 0), na);
+    const int kb = std::min(std::max(static_cast<int>(pb), 0), nb);
+    put(idx_m + ka * sa + kb * sb, profile.at(t * cf));
+  }
+  endCell(k0 + (n - 1) * step, t0 + (n - 1) * dt);
+  return static_cast<uint64_t>(n);
+}
+
+void LineDrawer::drawImage(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
+                           DrawStatistics* stats) const {
+  CV_Assert(disparity.type() == CV_32FC1);
+  const Eigen::Matrix3d R_W_C = T_W_C.linear();
+  const Eigen::Vector3d W_centre = T_W_C.translation();
+  stats->coordinate_transfers += 1;  // the camera centre
+  for (int y = 0; y < disparity.rows; ++y) {
+    const float* row = disparity.ptr<float>(y);
+    for (int x = 0; x < disparity.cols; ++x) {
+      const float d = row[x];
+      if (!camera_.isValidDisparity(d)) continue;  // no information
+      ++stats->used_image_pixels;
+      ++stats->coordinate_transfers;
+      const Eigen::Vector3d W_dir = R_W_C * camera_.rayThroughPixel(x, y).normalized();
+      stats->grid_cells_drawn += drawRay(W_centre, W_dir, pixelProfile(camera_, table_, x, y, d), grid);
+    }
+  }
+}
+
+uint64_t LineDrawer::drawPixel(int level, int x, int y, float d_px, const Eigen::Isometry3d& T_W_C,
+                               LocalGrid* grid) const {
+  const double X = DisparityPyramid::centreOf(level, x);
+  const double Y = DisparityPyramid::centreOf(level, y);
+  const Eigen::Vector3d W_dir = T_W_C.linear() * camera_.rayThroughPixel(X, Y).normalized();
+  return drawRay(T_W_C.translation(), W_dir, pixelProfile(camera_, table_, X, Y, d_px), grid);
+}
+
+void LineDrawer::descend(const DisparityPyramid& pyramid, int level, int x, int y, const Eigen::Isometry3d& T_W_C,
+                         LocalGrid* grid, DrawStatistics* stats) const {
+  const float d = pyramid.at(level, x, y);
+  ++stats->used_image_pixels;
+  if (d == DisparityPyramid::kInvalidMin) return;  // the whole block is invalid
+  if (level <= levels_.minLevel() || levels_.levelForDisparity(d) >= level) {
+    ++stats->coordinate_transfers;
+    stats->grid_cells_drawn += drawPixel(level, x, y, d, T_W_C, grid);
+    return;
+  }
+  const int w = pyramid.width(level - 1);
+  const int h = pyramid.height(level - 1);
+  for (int cy = 2 * y; cy <= 2 * y + 1 && cy < h; ++cy)
+    for (int cx = 2 * x; cx <= 2 * x + 1 && cx < w; ++cx) descend(pyramid, level - 1, cx, cy, T_W_C, grid, stats);
+}
+
+void LineDrawer::drawPyramid(const DisparityPyramid& min_pyramid, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
+                             DrawStatistics* stats) const {
+  stats->coordinate_transfers += 1;  // the camera centre
+  const int top = min_pyramid.topLevel();
+  for (int y = 0; y < min_pyramid.height(top); ++y)
+    for (int x = 0; x < min_pyramid.width(top); ++x) descend(min_pyramid, top, x, y, T_W_C, grid, stats);
+}
+
+}  // namespace stereo_occupancy

@@ -1,0 +1,125 @@
+#include "stereo_occupancy/ray_tracing.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+namespace stereo_occupancy {
+
+RayTracer::RayTracer(const StereoCameraModel& camera, const LogOddsTable& table, const PyramidLevelTable& levels)
+    : camera_(camera), table_(table), levels_(levels) {}
+
+template <typename Lookup>
+void RayTracer::traverse(const Eigen::Isometry3d& T_W_C, LocalGrid* grid, DrawStatistics* stats,
+                         Lookup&& lookup) const {
+  const auto& cfg = camera_.config();
+  const double c = grid->resolution();
+  const double f = cfg.focal_length_px;
+  const double max_range = cfg.max_range_m;
+  const double u_lo = -0.5, u_hi = cfg.width_px - 0.5, v_lo = -0.5, v_hi = cfg.height_px - 0.5;
+  const Eigen::Isometry3d T_C_W = T_W_C.inverse();
+  const Eigen::Matrix3d R_C_W = T_C_W.linear();
+  const Eigen::Vector3i& size = grid->size();
+  // Camera centre and four image corners (section V-B, step 1).
+  stats->coordinate_transfers += 5 + static_cast<uint64_t>(grid->numCells());
+
+  // C_cell(x, y, z) = C_first + x·C_step_x + y·C_step_y + z·C_step_z
+  const Eigen::Vector3d C_first = T_C_W * grid->cellCentre(0, 0, 0);
+  const Eigen::Vector3d C_step_x = R_C_W.col(0) * c;
+  const Eigen::Vector3d C_step_y = R_C_W.col(1) * c;
+  const Eigen::Vector3d C_step_z = R_C_W.col(2) * c;
+  float* data = grid->data();
+
+  for (int z = 0; z < size.z(); ++z) {
+    for (int y = 0; y < size.y(); ++y) {
+      Eigen::Vector3d C_p = C_first + y * C_step_y + z * C_step_z;
+      float* row = data + grid->linearIndex(0, y, z);
+      for (int x = 0; x < size.x(); ++x, C_p += C_step_x) {
+        if (C_p.z() <= 0.0) continue;
+        const double l = C_p.norm();  // step 2a
+        if (l > max_range) continue;
+        const double u = f * C_p.x() / C_p.z() + cfg.cx_px;  // step 2b
+        const double v = f * C_p.y() / C_p.z() + cfg.cy_px;
+        if (!(u >= u_lo && u < u_hi && v >= v_lo && v < v_hi)) continue;
+        const float d_hat = lookup(C_p, u, v, stats);  // step 2c
+        if (d_hat < 0.0f) continue;                     // footprint without information
+        const RangeProfile profile = pixelProfile(camera_, table_, u, v, d_hat);  // step 2d
+        const float l_f = static_cast<float>(l);
+        if (l_f - profile.l_p_m > profile.tail_m) continue;  // behind the measurement: unknown
+        row[x] = profile.at(l_f);                             // step 2e
+        ++stats->grid_cells_drawn;
+      }
+    }
+  }
+}
+
+void RayTracer::drawImage(const DisparityPyramid& max_pyramid, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
+                          DrawStatistics* stats) const {
+  const cv::Mat& image = max_pyramid.level(0);
+  const auto& cfg = camera_.config();
+  const double f = cfg.focal_length_px;
+  const double h = 0.5 * grid->resolution();
+  const Eigen::Matrix3d R_C_W = T_W_C.linear().transpose();
+  std::array<Eigen::Vector3d, 8> C_corner_offsets;
+  for (int k = 0; k < 8; ++k)
+    C_corner_offsets[k] = R_C_W * Eigen::Vector3d(k & 1 ? h : -h, k & 2 ? h : -h, k & 4 ? h : -h);
+  const double min_z = 1e-3 * grid->resolution();
+
+  traverse(T_W_C, grid, stats, [&](const Eigen::Vector3d& C_p, double, double, DrawStatistics* st) {
+    // Footprint: bounding rectangle of the 8 projected cube corners (step 2c).
+    double u0 = 1e300, u1 = -1e300, v0 = 1e300, v1 = -1e300;
+    bool behind = false;
+    for (const auto& off : C_corner_offsets) {
+      const Eigen::Vector3d q = C_p + off;
+      if (q.z() <= min_z) {
+        behind = true;  // the cell reaches behind the camera: its footprint is unbounded
+        break;
+      }
+      const double pu = f * q.x() / q.z() + cfg.cx_px;
+      const double pv = f * q.y() / q.z() + cfg.cy_px;
+      u0 = std::min(u0, pu);
+      u1 = std::max(u1, pu);
+      v0 = std::min(v0, pv);
+      v1 = std::max(v1, pv);
+    }
+    int x0 = 0, x1 = image.cols - 1, y0 = 0, y1 = image.rows - 1;
+    if (!behind) {
+      x0 = std::max(x0, static_cast<int>(std::floor(u0 + 0.5)));
+      x1 = std::min(x1, static_cast<int>(std::floor(u1 + 0.5)));
+      y0 = std::max(y0, static_cast<int>(std::floor(v0 + 0.5)));
+      y1 = std::min(y1, static_cast<int>(std::floor(v1 + 0.5)));
+    }
+    float m = DisparityPyramid::kInvalidMax;
+    for (int yy = y0; yy <= y1; ++yy) {
+      const float* row = image.ptr<float>(yy);
+      for (int xx = x0; xx <= x1; ++xx) m = row[xx] > m ? row[xx] : m;
+    }
+    st->used_image_pixels += static_cast<uint64_t>(x1 - x0 + 1) * static_cast<uint64_t>(y1 - y0 + 1);
+    return m;
+  });
+}
+
+void RayTracer::drawPyramid(const DisparityPyramid& max_pyramid, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
+                            DrawStatistics* stats) const {
+  const int top = max_pyramid.topLevel();
+  traverse(T_W_C, grid, stats, [&](const Eigen::Vector3d& C_p, double u, double v, DrawStatistics* st) {
+    // The level whose pixels are about one cell apart at the cell's depth (eq. 13).
+    const int i = std::clamp(levels_.levelForDepth(C_p.z()), 0, top);
+    const cv::Mat& level = max_pyramid.level(i);
+    // The 2x2 level-i pixels whose centres surround (u, v) (section VI-C).
+    const double s = std::ldexp(1.0, -i);
+    const int x0 = static_cast<int>(std::floor((u + 0.5) * s - 0.5));
+    const int y0 = static_cast<int>(std::floor((v + 0.5) * s - 0.5));
+    float m = DisparityPyramid::kInvalidMax;
+    for (int yy = std::max(y0, 0); yy <= y0 + 1 && yy < level.rows; ++yy) {
+      const float* row = level.ptr<float>(yy);
+      for (int xx = std::max(x0, 0); xx <= x0 + 1 && xx < level.cols; ++xx) {
+        m = std::max(m, row[xx]);
+        ++st->used_image_pixels;
+      }
+    }
+    return m;
+  });
+}
+
+}  // namespace stereo_occupancy

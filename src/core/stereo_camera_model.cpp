@@ -1,0 +1,51 @@
+#include "stereo_occupancy/stereo_camera_model.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+namespace stereo_occupancy {
+
+namespace {
+bool fail(std::string* why, const std::string& text) {
+  if (why) *why = text;
+  return false;
+}
+}  // namespace
+
+bool StereoCameraConfig::isValid(std::string* why) const {
+  if (width_px <= 0 || height_px <= 0) return fail(why, "image size must be positive");
+  if (!(std::isfinite(focal_length_px) && focal_length_px > 0.0))
+    return fail(why, "focal_length_px must be finite and > 0");
+  if (!std::isfinite(cx_px) || !std::isfinite(cy_px)) return fail(why, "cx_px/cy_px must be finite");
+  if (!(std::isfinite(baseline_m) && baseline_m > 0.0)) return fail(why, "baseline_m must be finite and > 0");
+  if (!(std::isfinite(delta_d_px) && delta_d_px > 0.0)) return fail(why, "delta_d_px must be finite and > 0");
+  if (!(std::isfinite(min_range_m) && min_range_m > 0.0)) return fail(why, "min_range_m must be finite and > 0");
+  if (!(std::isfinite(max_range_m) && max_range_m > min_range_m))
+    return fail(why, "max_range_m must be finite and > min_range_m");
+  if (!(std::isfinite(min_disparity_px) && min_disparity_px >= 0.0))
+    return fail(why, "min_disparity_px must be finite and >= 0");
+  if (!(max_disparity_px > min_disparity_px)) return fail(why, "max_disparity_px must be > min_disparity_px");
+  return true;
+}
+
+bool StereoCameraConfig::operator==(const StereoCameraConfig& o) const {
+  return width_px == o.width_px && height_px == o.height_px && focal_length_px == o.focal_length_px &&
+         cx_px == o.cx_px && cy_px == o.cy_px && baseline_m == o.baseline_m && delta_d_px == o.delta_d_px &&
+         min_range_m == o.min_range_m && max_range_m == o.max_range_m &&
+         min_disparity_px == o.min_disparity_px && max_disparity_px == o.max_disparity_px;
+}
+
+StereoCameraModel::StereoCameraModel(const StereoCameraConfig& config)
+    : config_(config),
+      bf_(config.baseline_m * config.focal_length_px),
+      inv_f_(1.0 / config.focal_length_px) {
+  min_valid_ = std::max(static_cast<float>(config.min_disparity_px), std::numeric_limits<float>::min());
+  max_valid_ = static_cast<float>(nearDisparity());
+}
+
+double StereoCameraModel::nearDisparity() const {
+  return std::min(config_.max_disparity_px, bf_ / config_.min_range_m);
+}
+
+}  // namespace stereo_occupancy

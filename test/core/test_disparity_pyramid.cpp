@@ -1,0 +1,139 @@
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+
+#include "stereo_occupancy/disparity_pyramid.h"
+
+using namespace stereo_occupancy;
+
+namespace {
+
+/// Random disparities with zeros (sky), NaN, negative and too-large values.
+cv::Mat randomDisparity(int w, int h, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> d(0.5f, 60.0f), kind(0.0f, 1.0f);
+  cv::Mat img(h, w, CV_32FC1);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float k = kind(rng);
+      img.at<float>(y, x) = k < 0.1f ? 0.0f : k < 0.15f ? std::nanf("") : k < 0.2f ? -3.0f : k < 0.22f ? 1e6f : d(rng);
+    }
+  return img;
+}
+
+void expectReductionExact(const DisparityPyramid& pyr, bool is_min) {
+  for (int i = 1; i <= pyr.topLevel(); ++i) {
+    const cv::Mat& lo = pyr.level(i - 1);
+    const cv::Mat& hi = pyr.level(i);
+    ASSERT_EQ(hi.cols, (lo.cols + 1) / 2);
+    ASSERT_EQ(hi.rows, (lo.rows + 1) / 2);
+    for (int y = 0; y < hi.rows; ++y)
+      for (int x = 0; x < hi.cols; ++x) {
+        float expected = is_min ? INFINITY : -INFINITY;
+        for (int cy = 2 * y; cy <= 2 * y + 1 && cy < lo.rows; ++cy)
+          for (int cx = 2 * x; cx <= 2 * x + 1 && cx < lo.cols; ++cx)
+            expected = is_min ? std::min(expected, lo.at<float>(cy, cx)) : std::max(expected, lo.at<float>(cy, cx));
+        ASSERT_EQ(hi.at<float>(y, x), expected) << "level " << i << " (" << x << ", " << y << ")";
+      }
+  }
+}
+
+}  // namespace
+
+TEST(DisparityPyramid, Level0IsSanitised) {
+  const StereoCameraModel cam{StereoCameraConfig()};  // near disparity 420 px
+  const cv::Mat img = randomDisparity(64, 48, 1);
+  DisparityPyramid min_pyr, max_pyr;
+  min_pyr.build(img, cam, PyramidType::kMinDisparity, 3);
+  max_pyr.build(img, cam, PyramidType::kMaxDisparity, 3);
+  for (int y = 0; y < img.rows; ++y)
+    for (int x = 0; x < img.cols; ++x) {
+      const float d = img.at<float>(y, x);
+      if (cam.isValidDisparity(d)) {
+        EXPECT_EQ(min_pyr.at(0, x, y), d);
+        EXPECT_EQ(max_pyr.at(0, x, y), d);
+      } else {
+        EXPECT_EQ(min_pyr.at(0, x, y), DisparityPyramid::kInvalidMin);
+        EXPECT_EQ(max_pyr.at(0, x, y), DisparityPyramid::kInvalidMax);
+      }
+    }
+}
+
+TEST(DisparityPyramid, MinPyramidObeysEq14) {
+  const StereoCameraModel cam{StereoCameraConfig()};
+  for (auto size : {cv::Size(640, 480), cv::Size(641, 479), cv::Size(37, 5)}) {
+    DisparityPyramid pyr;
+    pyr.build(randomDisparity(size.width, size.height, 2), cam, PyramidType::kMinDisparity, 6);
+    EXPECT_EQ(pyr.topLevel(), 6);
+    expectReductionExact(pyr, true);
+  }
+}
+
+TEST(DisparityPyramid, MaxPyramidObeysEq16) {
+  const StereoCameraModel cam{StereoCameraConfig()};
+  for (auto size : {cv::Size(640, 480), cv::Size(641, 479), cv::Size(37, 5)}) {
+    DisparityPyramid pyr;
+    pyr.build(randomDisparity(size.width, size.height, 3), cam, PyramidType::kMaxDisparity, 6);
+    expectReductionExact(pyr, false);
+  }
+}
+
+TEST(DisparityPyramid, EnlargedLevelsObeyEq15) {
+  const StereoCameraModel cam{StereoCameraConfig()};
+  DisparityPyramid pyr;
+  pyr.build(randomDisparity(40, 30, 4), cam, PyramidType::kMinDisparity, 2);
+  for (int i = -1; i >= -3; --i) {
+    EXPECT_EQ(pyr.width(i), 40 << -i);
+    EXPECT_EQ(pyr.height(i), 30 << -i);
+    for (int y = 0; y < pyr.height(i); ++y)
+      for (int x = 0; x < pyr.width(i); ++x)
+        ASSERT_EQ(pyr.at(i, x, y), pyr.at(i + 1, x / 2, y / 2)) << "level " << i;  // d_{i-1}(x,y) = d_i(x/2, y/2)
+  }
+  // Pixel centres: a level-1 pixel is the centre of its 2x2 block; level -1 halves pixels.
+  EXPECT_DOUBLE_EQ(DisparityPyramid::centreOf(1, 0), 0.5);
+  EXPECT_DOUBLE_EQ(DisparityPyramid::centreOf(2, 1), 5.5);
+  EXPECT_DOUBLE_EQ(DisparityPyramid::centreOf(-1, 0), -0.25);
+  EXPECT_DOUBLE_EQ(DisparityPyramid::centreOf(-1, 1), 0.25);
+}
+
+TEST(PyramidLevelTable, LevelChoiceObeysEq13) {
+  const StereoCameraModel cam{StereoCameraConfig()};
+  std::mt19937 rng(5);
+  for (double c : {0.1, 0.25, 0.5, 1.0}) {
+    const PyramidLevelTable table(cam, c);
+    std::uniform_real_distribution<double> d_dist(cam.farDisparity(), cam.nearDisparity());
+    for (int n = 0; n < 5000; ++n) {
+      const float d = static_cast<float>(d_dist(rng));
+      const int i = table.levelForDisparity(d);
+      if (i == table.topLevel() || i == table.minLevel()) continue;  // clamped
+      const double z = cam.depthFromDisparity(d);
+      const double dp = z * std::ldexp(1.0, i) / 700.0;  // eq. 12
+      ASSERT_GT(dp, 0.5 * c) << "d=" << d << " level " << i;  // eq. 13
+      ASSERT_LE(dp, c) << "d=" << d << " level " << i;
+      ASSERT_EQ(table.levelForDepth(z), i);
+    }
+  }
+}
+
+TEST(PyramidLevelTable, Fig3LevelsAndFarRange) {
+  const StereoCameraModel cam{StereoCameraConfig()};
+  const PyramidLevelTable t05(cam, 0.5);
+  // Fig. 3 (0.5 m grid): 6..25 m need only reduced resolutions, levels 3..5.
+  EXPECT_EQ(t05.levelForDepth(25.0), 3);
+  EXPECT_EQ(t05.levelForDepth(6.0), 5);
+  // Zero disparity (sky) and beyond-range disparities use the level of the maximum range.
+  EXPECT_EQ(t05.levelForDisparity(0.0f), 3);
+  EXPECT_EQ(t05.levelForDisparity(1.0f), 3);
+  EXPECT_EQ(t05.minLevel(), 0);
+  // Top level: the near disparity (0.5 m: 420 px) -> floor(log2(0.5 * 420 / 0.3)) = 9, capped by the image.
+  EXPECT_EQ(t05.topLevel(), 9);
+
+  // A range beyond c·f needs enlarged levels (eq. 15).
+  StereoCameraConfig far = StereoCameraConfig();
+  far.max_range_m = 100.0;
+  const PyramidLevelTable t01(StereoCameraModel(far), 0.1);
+  EXPECT_EQ(t01.minLevel(), -1);  // c·f/R = 0.7 px
+  EXPECT_EQ(t01.levelForDisparity(0.0f), -1);
+}

@@ -1,0 +1,303 @@
+// Geometry of the four drawing algorithms on scenes with a known answer.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <set>
+#include <tuple>
+
+#include "stereo_occupancy/disparity_drawer.h"
+#include "stereo_occupancy/synthetic_scene.h"
+
+using namespace stereo_occupancy;
+
+namespace {
+
+const DrawingAlgorithm kAll[] = {DrawingAlgorithm::kLine, DrawingAlgorithm::kLinePyramid,
+                                 DrawingAlgorithm::kRayTrace, DrawingAlgorithm::kRayTracePyramid};
+
+DrawingConfig config(DrawingAlgorithm a, double resolution = 0.25) {
+  DrawingConfig c;
+  c.algorithm = a;
+  c.resolution_m = resolution;
+  return c;
+}
+
+std::vector<Eigen::Isometry3d> testPoses() {
+  std::vector<Eigen::Isometry3d> poses;
+  poses.push_back(lookingAlongX(Eigen::Vector3d(0.1, 0.2, 5.3)));
+  poses.push_back(lookingAlongX(Eigen::Vector3d(-3.0, 7.7, 2.0), 0.6, 0.3));
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = (Eigen::AngleAxisd(2.1, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(-0.7, Eigen::Vector3d::UnitY()) *
+                Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitX()))
+                   .toRotationMatrix();
+  T.translation() = Eigen::Vector3d(12.3, -4.4, 30.0);
+  poses.push_back(T);
+  return poses;
+}
+
+/// A cell's depth, image position and range as seen from T_W_C.
+struct CellView {
+  double z, u, v, l;
+};
+CellView view(const LocalGrid& g, int x, int y, int z, const Eigen::Isometry3d& T_W_C, const StereoCameraModel& cam) {
+  const Eigen::Vector3d C_p = T_W_C.inverse() * g.cellCentre(x, y, z);
+  const auto& cfg = cam.config();
+  return {C_p.z(), cfg.focal_length_px * C_p.x() / C_p.z() + cfg.cx_px,
+          cfg.focal_length_px * C_p.y() / C_p.z() + cfg.cy_px, C_p.norm()};
+}
+bool wellInside(const CellView& cv, const StereoCameraConfig& cfg, double margin_px) {
+  return cv.z > 0.0 && cv.u > margin_px && cv.u < cfg.width_px - margin_px && cv.v > margin_px &&
+         cv.v < cfg.height_px - margin_px;
+}
+
+using Key = std::tuple<int, int, int>;
+std::set<Key> occupiedCells(const LocalGrid& g) {
+  std::set<Key> out;
+  for (int z = 0; z < g.size().z(); ++z)
+    for (int y = 0; y < g.size().y(); ++y)
+      for (int x = 0; x < g.size().x(); ++x)
+        if (g.at(x, y, z) > 0.0f) {
+          const Eigen::Vector3i k = g.originIndex() + Eigen::Vector3i(x, y, z);
+          out.insert({k.x(), k.y(), k.z()});
+        }
+  return out;
+}
+
+}  // namespace
+
+// A fronto-parallel wall 10 m in front fills the image (constant disparity
+// 21 px): occupied at the wall, free in front, unknown behind, for all four
+// algorithms and three camera poses.
+TEST(Drawing, FrontoParallelWall) {
+  StereoCameraConfig cam_cfg;
+  const StereoCameraModel cam(cam_cfg);
+  const double wall_z = 10.0;
+  const cv::Mat image(480, 640, CV_32FC1, cv::Scalar(cam.disparityFromDepth(wall_z)));
+  const double dz = cam.depthUncertainty(wall_z);
+
+  for (const auto& T : testPoses()) {
+    std::map<DrawingAlgorithm, std::set<Key>> occupied;
+    for (DrawingAlgorithm a : kAll) {
+      DisparityDrawer drawer(cam_cfg, config(a));
+      LocalGrid grid;
+      const DrawStatistics stats = drawer.draw(image, T, &grid);
+      const double c = grid.resolution();
+      size_t front = 0, front_free = 0, front_occupied = 0, at_wall = 0, at_wall_occupied = 0, behind_known = 0;
+      for (int z = 0; z < grid.size().z(); ++z)
+        for (int y = 0; y < grid.size().y(); ++y)
+          for (int x = 0; x < grid.size().x(); ++x) {
+            const CellView cv = view(grid, x, y, z, T, cam);
+            const float L = grid.at(x, y, z);
+            const double n = cv.l / std::max(cv.z, 1e-9);
+            if (cv.z > wall_z + c * 0.87 + 3.0 * dz * 1.16 + 0.01) {
+              behind_known += L != LocalGrid::kUnknown;  // nothing is drawn behind the tail
+              continue;
+            }
+            if (!wellInside(cv, cam_cfg, 40.0)) continue;
+            if (cv.z > 1.0 && cv.z < wall_z - c * 0.87 * n - 1.3 * dz * n) {
+              ++front;
+              front_free += L < 0.0f && L != LocalGrid::kUnknown;
+              front_occupied += L > 0.0f;
+            } else if (std::abs(cv.z - wall_z) < 0.25 * c) {
+              ++at_wall;
+              at_wall_occupied += L > 0.0f;
+            }
+          }
+      SCOPED_TRACE(std::string(toString(a)) + " at pose " + std::to_string(T.translation().x()));
+      EXPECT_GT(stats.different_grid_cells, 0u);
+      EXPECT_EQ(behind_known, 0u);
+      ASSERT_GT(front, 1000u);
+      EXPECT_EQ(front_occupied, 0u);
+      // Pyramidal line drawing spaces its lines up to one cell apart (eq. 13)
+      // and a Bresenham line takes one cell per slab: on oblique views a few
+      // cells fall between the lines (the paper's "risk of remaining holes").
+      const bool sparse = a == DrawingAlgorithm::kLinePyramid;
+      EXPECT_GT(static_cast<double>(front_free) / front, sparse ? 0.95 : 0.97) << front_free << " of " << front;
+      ASSERT_GT(at_wall, 50u);
+      if (sparse) {
+        EXPECT_GT(static_cast<double>(at_wall_occupied) / at_wall, 0.8) << at_wall_occupied << " of " << at_wall;
+      } else {
+        EXPECT_EQ(at_wall_occupied, at_wall);
+      }
+      // Keep only the interior for the comparison between algorithms.
+      std::set<Key> interior;
+      for (const Key& k : occupiedCells(grid)) {
+        const Eigen::Vector3i g(std::get<0>(k), std::get<1>(k), std::get<2>(k));
+        const Eigen::Vector3i l = g - grid.originIndex();
+        if (wellInside(view(grid, l.x(), l.y(), l.z(), T, cam), cam_cfg, 40.0)) interior.insert(k);
+      }
+      occupied[a] = interior;
+    }
+    // The four agree on the wall's occupied cells within one cell (allowing
+    // 0.1 % at the edge of the compared region).
+    for (DrawingAlgorithm a : kAll)
+      for (DrawingAlgorithm b : kAll) {
+        if (a == b) continue;
+        size_t missing = 0;
+        for (const Key& k : occupied[a]) {
+          bool found = false;
+          for (int dx = -1; dx <= 1 && !found; ++dx)
+            for (int dy = -1; dy <= 1 && !found; ++dy)
+              for (int dz2 = -1; dz2 <= 1 && !found; ++dz2)
+                found = occupied[b].count({std::get<0>(k) + dx, std::get<1>(k) + dy, std::get<2>(k) + dz2}) > 0;
+          missing += !found;
+        }
+        EXPECT_LE(missing, occupied[a].size() / 1000) << toString(a) << " vs " << toString(b) << ": " << occupied[a].size() << " cells";
+      }
+  }
+}
+
+// Zero disparity is infinitely far: free space out to the maximum range.
+TEST(Drawing, ZeroDisparityIsFreeToMaxRange) {
+  StereoCameraConfig cam_cfg;
+  const StereoCameraModel cam(cam_cfg);
+  const cv::Mat sky(480, 640, CV_32FC1, cv::Scalar(0.0f));
+  for (DrawingAlgorithm a : kAll) {
+    for (const auto& T : testPoses()) {
+      DisparityDrawer drawer(cam_cfg, config(a, 0.5));
+      LocalGrid grid;
+      drawer.draw(sky, T, &grid);
+      size_t inside = 0, free_cells = 0, beyond = 0, occupied = 0;
+      for (int z = 0; z < grid.size().z(); ++z)
+        for (int y = 0; y < grid.size().y(); ++y)
+          for (int x = 0; x < grid.size().x(); ++x) {
+            const CellView cv = view(grid, x, y, z, T, cam);
+            const float L = grid.at(x, y, z);
+            occupied += L > 0.0f;
+            if (cv.l > 25.0 + 0.87 * 0.5) beyond += L != LocalGrid::kUnknown;
+            if (cv.l < 24.0 && cv.l > 1.0 && wellInside(cv, cam_cfg, 20.0)) {
+              ++inside;
+              free_cells += L < 0.0f;
+            }
+          }
+      SCOPED_TRACE(toString(a));
+      EXPECT_EQ(occupied, 0u);
+      EXPECT_EQ(beyond, 0u);
+      ASSERT_GT(inside, 1000u);
+      EXPECT_GT(static_cast<double>(free_cells) / inside, 0.97) << free_cells << " of " << inside;
+    }
+  }
+}
+
+// Invalid pixels carry no information.
+TEST(Drawing, InvalidPixelsChangeNothing) {
+  StereoCameraConfig cam_cfg;
+  cam_cfg.max_disparity_px = 128.0;
+  const Eigen::Isometry3d T = testPoses()[1];
+  for (float bad : {std::nanf(""), -1.0f, -INFINITY, INFINITY, 129.0f, 1e9f}) {
+    const cv::Mat image(480, 640, CV_32FC1, cv::Scalar(bad));
+    for (DrawingAlgorithm a : kAll) {
+      DisparityDrawer drawer(cam_cfg, config(a));
+      LocalGrid grid;
+      const DrawStatistics stats = drawer.draw(image, T, &grid);
+      EXPECT_EQ(grid.countKnown(), 0u) << toString(a) << " value " << bad;
+      EXPECT_EQ(stats.grid_cells_drawn, 0u);
+    }
+  }
+  // Left half invalid: nothing is drawn where only the left half looks.
+  const StereoCameraModel cam(cam_cfg);
+  cv::Mat half(480, 640, CV_32FC1, cv::Scalar(cam.disparityFromDepth(12.0)));
+  half(cv::Rect(0, 0, 320, 480)).setTo(std::nanf(""));
+  for (DrawingAlgorithm a : kAll) {
+    DisparityDrawer drawer(cam_cfg, config(a));
+    LocalGrid grid;
+    drawer.draw(half, T, &grid);
+    size_t left = 0;
+    for (int z = 0; z < grid.size().z(); ++z)
+      for (int y = 0; y < grid.size().y(); ++y)
+        for (int x = 0; x < grid.size().x(); ++x) {
+          if (grid.at(x, y, z) == LocalGrid::kUnknown) continue;
+          const CellView cv = view(grid, x, y, z, T, cam);
+          // A cell's footprint is about c·f/z px wide; beyond that it sees only the left half.
+          if (cv.z > 2.0 && cv.u < 320.0 - 0.25 * 700.0 / cv.z * 1.5 - 2.0) ++left;
+        }
+    EXPECT_EQ(left, 0u) << toString(a);
+  }
+}
+
+// Where lines overlap the larger value stays, whatever the order (V-A, 2b).
+TEST(Drawing, ObstaclePriority) {
+  StereoCameraConfig cam_cfg;
+  const StereoCameraModel cam(cam_cfg);
+  const InverseSensorModel model{InverseSensorModelConfig()};
+  const LogOddsTable table(model, 0.25);
+  const PyramidLevelTable levels(cam, 0.25);
+  const LineDrawer drawer(cam, table, levels);
+  const Eigen::Vector3d origin(0.1, 0.1, 0.1), dir = Eigen::Vector3d(1, 0.2, 0.1).normalized();
+  const RangeProfile obstacle = table.profile(8.0f, static_cast<float>(cam.depthUncertainty(8.0)));
+  const RangeProfile free_ray = table.freeProfile();
+  LocalGrid a, b;
+  a.reset(Eigen::Vector3i(-4, -4, -4), Eigen::Vector3i(120, 40, 40), 0.25);
+  b = a;
+  drawer.drawRay(origin, dir, free_ray, &a);
+  drawer.drawRay(origin, dir, obstacle, &a);
+  drawer.drawRay(origin, dir, obstacle, &b);
+  drawer.drawRay(origin, dir, free_ray, &b);
+  const Eigen::Vector3i hit = LocalGrid::globalIndex(origin + 8.0 * dir, 0.25) - a.originIndex();
+  EXPECT_GT(a.at(hit.x(), hit.y(), hit.z()), 0.5f);
+  for (size_t i = 0; i < a.numCells(); ++i) ASSERT_EQ(a.data()[i], b.data()[i]);
+  // The free ray continues past the obstacle to the maximum range.
+  const Eigen::Vector3i far = LocalGrid::globalIndex(origin + 20.0 * dir, 0.25) - a.originIndex();
+  EXPECT_NEAR(a.at(far.x(), far.y(), far.z()), model.freeLogOdds(), 1e-5);
+}
+
+// Table I's shape: the pyramid reads far fewer pixels and draws far fewer
+// cells for nearly the same map; counters have the paper's meaning.
+TEST(Drawing, Table1Counters) {
+  StereoCameraConfig cam_cfg;
+  const StereoCameraModel cam(cam_cfg);
+  Eigen::Isometry3d T;
+  const cv::Mat image = table1Image(cam, &T);
+  size_t valid = 0;
+  for (int y = 0; y < image.rows; ++y)
+    for (int x = 0; x < image.cols; ++x) valid += cam.isValidDisparity(image.at<float>(y, x));
+
+  std::map<DrawingAlgorithm, DrawStatistics> stats;
+  std::map<DrawingAlgorithm, LocalGrid> grids;
+  for (DrawingAlgorithm a : kAll) {
+    DisparityDrawer drawer(cam_cfg, config(a));
+    stats[a] = drawer.draw(image, T, &grids[a]);
+  }
+  const auto& line = stats[DrawingAlgorithm::kLine];
+  const auto& line_pyr = stats[DrawingAlgorithm::kLinePyramid];
+  EXPECT_EQ(line.used_image_pixels, valid);
+  EXPECT_EQ(line.coordinate_transfers, valid + 1);
+  // One transfer per drawn line (each read one pyramid pixel) plus the camera centre.
+  EXPECT_GT(line_pyr.coordinate_transfers, 1u);
+  EXPECT_LE(line_pyr.coordinate_transfers, line_pyr.used_image_pixels + 1);
+  EXPECT_LT(line_pyr.used_image_pixels * 10, line.used_image_pixels);
+  EXPECT_LT(line_pyr.grid_cells_drawn * 10, line.grid_cells_drawn);
+  EXPECT_GT(line.grid_cells_drawn, line.different_grid_cells);
+  // Nearly equal outputs: the different cells agree within 15 %.
+  EXPECT_NEAR(static_cast<double>(line_pyr.different_grid_cells) / line.different_grid_cells, 1.0, 0.15);
+  const auto& rt = stats[DrawingAlgorithm::kRayTrace];
+  const auto& rt_pyr = stats[DrawingAlgorithm::kRayTracePyramid];
+  EXPECT_EQ(rt.coordinate_transfers, grids[DrawingAlgorithm::kRayTrace].numCells() + 5);
+  EXPECT_EQ(rt.coordinate_transfers, rt_pyr.coordinate_transfers);
+  EXPECT_LT(rt_pyr.used_image_pixels * 50, rt.used_image_pixels);
+  EXPECT_EQ(rt.grid_cells_drawn, rt.different_grid_cells);  // ray tracing draws each cell once
+}
+
+TEST(Drawing, RejectsBadInput) {
+  StereoCameraConfig cam_cfg;
+  DisparityDrawer drawer(cam_cfg, config(DrawingAlgorithm::kLinePyramid));
+  LocalGrid grid;
+  const Eigen::Isometry3d T = testPoses()[0];
+  EXPECT_THROW(drawer.draw(cv::Mat(480, 640, CV_16UC1, cv::Scalar(0)), T, &grid), std::invalid_argument);
+  EXPECT_THROW(drawer.draw(cv::Mat(240, 640, CV_32FC1, cv::Scalar(0)), T, &grid), std::invalid_argument);
+  Eigen::Isometry3d bad = T;
+  bad.linear() *= 1.1;
+  EXPECT_THROW(drawer.draw(cv::Mat(480, 640, CV_32FC1, cv::Scalar(0)), bad, &grid), std::invalid_argument);
+  bad = T;
+  bad.translation().x() = std::nan("");
+  EXPECT_THROW(drawer.draw(cv::Mat(480, 640, CV_32FC1, cv::Scalar(0)), bad, &grid), std::invalid_argument);
+  DrawingConfig c = config(DrawingAlgorithm::kLine);
+  c.resolution_m = 0.0;
+  EXPECT_THROW(DisparityDrawer(cam_cfg, c), std::invalid_argument);
+  DrawingAlgorithm parsed;
+  EXPECT_TRUE(parseDrawingAlgorithm("raytrace_pyramid", &parsed));
+  EXPECT_EQ(parsed, DrawingAlgorithm::kRayTracePyramid);
+  EXPECT_FALSE(parseDrawingAlgorithm("bresenham", &parsed));
+}

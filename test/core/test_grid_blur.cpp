@@ -1,0 +1,96 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "stereo_occupancy/grid_blur.h"
+
+using namespace stereo_occupancy;
+
+namespace {
+LocalGrid impulseGrid(int n, double res, const std::vector<Eigen::Vector3i>& cells, float value) {
+  LocalGrid g;
+  g.reset(Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(n, n, n), res);
+  for (const auto& c : cells) g.at(c.x(), c.y(), c.z()) = value;
+  return g;
+}
+double sum(const LocalGrid& g, int x0, int x1, int y0, int y1, int z0, int z1) {
+  double s = 0.0;
+  for (int z = z0; z <= z1; ++z)
+    for (int y = y0; y <= y1; ++y)
+      for (int x = x0; x <= x1; ++x) {
+        const float v = g.at(x, y, z);
+        if (v != LocalGrid::kUnknown) s += v;
+      }
+  return s;
+}
+}  // namespace
+
+TEST(DistanceDependentBlur, SigmaEq17) {
+  BlurConfig c;
+  c.sigma_trans_m = 0.1;
+  c.sigma_angle_rad = 0.02;
+  DistanceDependentBlur blur(c);
+  EXPECT_NEAR(blur.sigmaAt(0.0), 0.1, 1e-12);
+  EXPECT_NEAR(blur.sigmaAt(10.0), std::sqrt(0.01 + 0.04), 1e-12);
+  EXPECT_NEAR(blur.sigmaAt(25.0), std::sqrt(0.01 + 0.25), 1e-12);
+}
+
+TEST(DistanceDependentBlur, OffWhenBothSigmasAreZero) {
+  DistanceDependentBlur blur{BlurConfig()};
+  LocalGrid g = impulseGrid(10, 0.25, {{5, 5, 5}}, 2.0f);
+  const LocalGrid before = g;
+  blur.apply(Eigen::Vector3d::Zero(), &g);
+  for (size_t i = 0; i < g.numCells(); ++i) ASSERT_EQ(g.data()[i], before.data()[i]);
+  EXPECT_EQ(blur.paddingCells(25.0, 0.25), 0);
+}
+
+TEST(DistanceDependentBlur, ConstantSigmaIsAGaussian) {
+  BlurConfig c;
+  c.sigma_trans_m = 0.25;  // one cell at 0.25 m
+  DistanceDependentBlur blur(c);
+  LocalGrid g = impulseGrid(15, 0.25, {{7, 7, 7}}, 2.0f);
+  blur.apply(Eigen::Vector3d(0, 0, 0), &g);
+  const std::vector<float> k = blur.kernel(2);  // σ = 2 · 0.5 cells
+  ASSERT_EQ(k.size(), 7u);                       // radius ceil(3σ) = 3
+  EXPECT_NEAR(k[3], 1.0 / (std::sqrt(2 * M_PI) * (1 - 2 * 0.00135)), 3e-3);
+  EXPECT_NEAR(g.at(7, 7, 7), 2.0 * k[3] * k[3] * k[3], 1e-5);
+  EXPECT_NEAR(g.at(8, 7, 7), 2.0 * k[4] * k[3] * k[3], 1e-5);
+  EXPECT_NEAR(g.at(8, 9, 6), 2.0 * k[4] * k[5] * k[2], 1e-5);
+  EXPECT_NEAR(sum(g, 0, 14, 0, 14, 0, 14), 2.0, 1e-4);  // mass is kept away from the border
+  EXPECT_EQ(g.at(0, 0, 0), LocalGrid::kUnknown);          // out of the kernel's reach: still unknown
+}
+
+TEST(DistanceDependentBlur, FartherCellsAreBlurredMore) {
+  BlurConfig c;
+  c.sigma_angle_rad = 0.02;  // σ = 0.1 m at 5 m, 0.4 m at 20 m
+  DistanceDependentBlur blur(c);
+  const double res = 0.1;
+  // Camera at the grid's x = 0 plane; impulses at 5 m and at 20 m.
+  LocalGrid g;
+  g.reset(Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(230, 21, 21), res);
+  g.at(50, 10, 10) = 1.0f;
+  g.at(200, 10, 10) = 1.0f;
+  const Eigen::Vector3d camera(0.05, 1.05, 1.05);
+  blur.apply(camera, &g);
+  EXPECT_NEAR(blur.sigmaAt(5.0) / res, 1.0, 1e-9);
+  EXPECT_NEAR(blur.sigmaAt(20.0) / res, 4.0, 1e-9);
+  const float near_peak = g.at(50, 10, 10), far_peak = g.at(200, 10, 10);
+  EXPECT_GT(near_peak, 5.0f * far_peak);
+  // Kernel of σ = 1 cell at the near impulse; of σ = 4 cells at the far one.
+  const double k1 = 1.0 / (std::sqrt(2 * M_PI) * 1.0), k4 = 1.0 / (std::sqrt(2 * M_PI) * 4.0);
+  EXPECT_NEAR(near_peak, k1 * k1 * k1, 0.1 * k1 * k1 * k1);
+  EXPECT_NEAR(far_peak, k4 * k4 * k4, 0.1 * k4 * k4 * k4);
+  // The far one spreads 8 cells along y, the near one does not.
+  EXPECT_GT(g.at(200, 18, 10), 0.0f);
+  EXPECT_EQ(g.at(50, 18, 10), LocalGrid::kUnknown);
+}
+
+TEST(BlurConfig, Validation) {
+  BlurConfig c;
+  EXPECT_TRUE(c.isValid());
+  c.sigma_trans_m = -0.1;
+  EXPECT_FALSE(c.isValid());
+  c = BlurConfig();
+  c.sigma_angle_rad = std::nan("");
+  EXPECT_FALSE(c.isValid());
+}

@@ -1,0 +1,81 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "stereo_occupancy/stereo_camera_model.h"
+
+using stereo_occupancy::StereoCameraConfig;
+using stereo_occupancy::StereoCameraModel;
+
+namespace {
+StereoCameraConfig paperCamera() {
+  StereoCameraConfig c;  // b = 0.3 m, f = 700 px, Δd = 0.5 px, 640x480
+  return c;
+}
+}  // namespace
+
+TEST(StereoCameraModel, DepthFromDisparityEq1) {
+  StereoCameraModel cam(paperCamera());
+  EXPECT_DOUBLE_EQ(cam.bf(), 210.0);
+  EXPECT_DOUBLE_EQ(cam.depthFromDisparity(21.0), 10.0);
+  EXPECT_DOUBLE_EQ(cam.disparityFromDepth(25.0), 8.4);
+  EXPECT_TRUE(std::isinf(cam.depthFromDisparity(0.0)));
+}
+
+TEST(StereoCameraModel, PointInOpticalFrameEq2) {
+  StereoCameraModel cam(paperCamera());
+  // 70 px right of and 35 px above the principal point at 10 m depth.
+  const Eigen::Vector3d p = cam.pointFromDisparity(319.5 + 70.0, 239.5 - 35.0, 21.0);
+  EXPECT_NEAR(p.x(), 1.0, 1e-12);
+  EXPECT_NEAR(p.y(), -0.5, 1e-12);  // y down: above the centre is negative
+  EXPECT_NEAR(p.z(), 10.0, 1e-12);
+  EXPECT_NEAR(StereoCameraModel::range(p), std::sqrt(1.0 + 0.25 + 100.0), 1e-12);  // eq. 6
+}
+
+TEST(StereoCameraModel, UncertaintiesEq4Eq5Eq7) {
+  StereoCameraModel cam(paperCamera());
+  EXPECT_NEAR(cam.depthUncertainty(10.0), 100.0 * 0.5 / 210.0, 1e-12);  // 0.238 m
+  EXPECT_NEAR(cam.depthUncertainty(10.0), 0.2381, 1e-4);
+  EXPECT_NEAR(cam.lateralUncertainty(10.0), 10.0 / 1400.0, 1e-12);
+  // Off the axis the range uncertainty grows with l/z.
+  EXPECT_NEAR(cam.rangeUncertainty(10.0, 12.0), cam.depthUncertainty(10.0) * 1.2, 1e-12);
+}
+
+TEST(StereoCameraModel, DisparityValidity) {
+  StereoCameraConfig cfg = paperCamera();
+  cfg.min_range_m = 1.0;  // near disparity 210 px
+  StereoCameraModel cam(cfg);
+  EXPECT_TRUE(cam.isValidDisparity(0.0f));  // infinitely far
+  EXPECT_TRUE(cam.isValidDisparity(21.0f));
+  EXPECT_TRUE(cam.isValidDisparity(210.0f));
+  EXPECT_FALSE(cam.isValidDisparity(210.5f));  // nearer than the minimum range
+  EXPECT_FALSE(cam.isValidDisparity(-1.0f));
+  EXPECT_FALSE(cam.isValidDisparity(std::nanf("")));
+  EXPECT_FALSE(cam.isValidDisparity(INFINITY));
+  cfg.min_disparity_px = 4.0;
+  cfg.max_disparity_px = 64.0;
+  StereoCameraModel matcher(cfg);
+  EXPECT_TRUE(matcher.isValidDisparity(0.0f));
+  EXPECT_FALSE(matcher.isValidDisparity(3.9f));
+  EXPECT_TRUE(matcher.isValidDisparity(4.0f));
+  EXPECT_FALSE(matcher.isValidDisparity(64.5f));
+  EXPECT_DOUBLE_EQ(matcher.nearDisparity(), 64.0);
+}
+
+TEST(StereoCameraModel, ConfigValidation) {
+  StereoCameraConfig cfg = paperCamera();
+  EXPECT_TRUE(cfg.isValid());
+  std::string why;
+  cfg.focal_length_px = 0.0;
+  EXPECT_FALSE(cfg.isValid(&why));
+  EXPECT_NE(why.find("focal_length_px"), std::string::npos);
+  cfg = paperCamera();
+  cfg.baseline_m = std::nan("");
+  EXPECT_FALSE(cfg.isValid());
+  cfg = paperCamera();
+  cfg.max_range_m = 0.2;  // below the minimum range
+  EXPECT_FALSE(cfg.isValid());
+  cfg = paperCamera();
+  cfg.delta_d_px = -0.5;
+  EXPECT_FALSE(cfg.isValid());
+}
