@@ -87,7 +87,12 @@ struct RangeProfile {
     if (!(u >= front_m)) return free_log_odds;  // also for l_p = inf
     // Eq. 11: the cell-wide window around l reaches to the point nearest l_p.
     const float e = u > half_cell_m ? u - half_cell_m : (u < -half_cell_m ? u + half_cell_m : 0.0f);
-    const float x = (e - row_origin_m) * samples_per_m;
+    return sample((e - row_origin_m) * samples_per_m);
+  }
+
+  /// The table at fractional sample x = (e - row_origin_m) · samples_per_m,
+  /// 0 <= x <= (kFrontSigmas + kTailSigmas) · kSamplesPerSigma.
+  float sample(float x) const {
     const int j = static_cast<int>(x);
     const float frac = x - static_cast<float>(j);
     const float* r0 = row + j;

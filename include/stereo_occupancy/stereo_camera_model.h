@@ -83,7 +83,7 @@ class StereoCameraModel {
   /// True if the pixel's value carries information: 0 (infinitely far) or a
   /// finite disparity in [min_disparity_px, nearDisparity()].
   bool isValidDisparity(float d_px) const {
-    return d_px == 0.0f || (d_px >= min_valid_ && d_px <= max_valid_);
+    return (d_px == 0.0f) | ((d_px >= min_valid_) & (d_px <= max_valid_));  // branch-free; false for NaN
   }
 
  private:

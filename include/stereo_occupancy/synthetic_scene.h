@@ -45,8 +45,10 @@ Eigen::Isometry3d lookingAlongX(const Eigen::Vector3d& W_position, double yaw_ra
 SyntheticScene table1Scene(Eigen::Isometry3d* T_W_C);
 
 /// The Table I test image: table1Scene() rendered by the paper's camera
-/// (640x480, f = 700 px, b = 0.3 m), with 3 % invalid speckle and a
-/// texture-less (invalid) patch.
+/// (640x480, f = 700 px, b = 0.3 m). Like Fig. 6, about a third of the pixels
+/// are invalid: the texture-less sky more than 60 px above the horizon (the
+/// sky below it is matched at zero disparity), 3 % speckle and a texture-less
+/// patch on the ground.
 cv::Mat table1Image(const StereoCameraModel& camera, Eigen::Isometry3d* T_W_C);
 
 }  // namespace stereo_occupancy

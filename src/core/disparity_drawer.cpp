@@ -73,7 +73,9 @@ void DisparityDrawer::checkInput(const cv::Mat& disparity, const Eigen::Isometry
 }
 
 void DisparityDrawer::prepareGrid(const Eigen::Isometry3d& T_W_C, LocalGrid* grid) const {
-  const int padding = blur_.paddingCells(camera_.config().max_range_m, config_.resolution_m);
+  // One cell of padding keeps every line strictly inside the grid (the fast
+  // path of LineDrawer::drawRay); the blur needs room for its kernels.
+  const int padding = 1 + blur_.paddingCells(camera_.config().max_range_m, config_.resolution_m);
   fitGridToBox(frustumBoundingBox(camera_, T_W_C), config_.resolution_m, padding, grid);
 }
 

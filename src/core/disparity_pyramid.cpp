@@ -13,13 +13,16 @@ void DisparityPyramid::build(const cv::Mat& disparity, const StereoCameraModel& 
   top_level = std::max(top_level, 0);
   levels_.resize(top_level + 1);
 
-  // Level 0: sanitise. NaN, negative and out-of-range values carry no information.
+  // Level 0: sanitise. NaN, negative and out-of-range values carry no
+  // information. Branch-free, so that it vectorises.
   cv::Mat& d0 = levels_[0];
   d0.create(disparity.rows, disparity.cols, CV_32FC1);
   for (int y = 0; y < disparity.rows; ++y) {
     const float* in = disparity.ptr<float>(y);
     float* out = d0.ptr<float>(y);
-    for (int x = 0; x < disparity.cols; ++x) out[x] = camera.isValidDisparity(in[x]) ? in[x] : invalid;
+    for (int x = 0; x < disparity.cols; ++x) {
+      out[x] = camera.isValidDisparity(in[x]) ? in[x] : invalid;
+    }
   }
 
   for (int i = 1; i <= top_level; ++i) {

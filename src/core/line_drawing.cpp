@@ -50,9 +50,8 @@ uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vecto
   endCell(k0, t0);
   if (n == 1) return 1;
 
-  // Inner slabs: 0 < t < t_end; the segment lies inside the grid's box, so
-  // truncation is floor (the clamps only guard rounding at the box's faces).
-  float t = static_cast<float>(t0 + dt);
+  // Inner slabs 1 .. n-2: 0 < t < t_end, so their cells lie on the segment.
+  const float t1 = static_cast<float>(t0 + dt);
   float pa = static_cast<float>(g0[a] + W_dir[a] * (t0 + dt));
   float pb = static_cast<float>(g0[b] + W_dir[b] * (t0 + dt));
   const float dta = static_cast<float>(W_dir[a] * dt), dtb = static_cast<float>(W_dir[b] * dt);
@@ -60,18 +59,56 @@ uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vecto
   int64_t idx_m = static_cast<int64_t>(k0 + step) * stride[m];
   const int64_t didx_m = step * stride[m];
   const int64_t sa = stride[a], sb = stride[b];
-  // Free space up to the measurement's front: one value for all these cells.
-  const float free_until = (profile.l_p_m + profile.front_m) * static_cast<float>(inv_c);
+  const float inv_cf = static_cast<float>(inv_c);
+  auto firstWith = [&](float u) {  // first inner k whose t_k reaches (l_p + u) / c (n - 1 if none)
+    const float steps = std::ceil(((profile.l_p_m + u) * inv_cf - t1) / dtf);
+    return steps <= 0.0f ? 1 : (steps >= static_cast<float>(n) ? n - 1 : std::min(n - 1, 1 + static_cast<int>(steps)));
+  };
+  // Free space up to the measurement's front: one value for all those cells.
+  const int k_free = firstWith(profile.front_m);
+  // When both ends lie inside the grid (the usual case: the grid covers the
+  // frustum), so does the segment; truncation is then floor and needs no clamp.
+  const Eigen::Vector3d g_end = g0 + W_dir * t_end;
+  const double margin = 1e-3;
+  const bool inside = (g0.array() >= margin).all() && (g_end.array() >= margin).all() &&
+                      (g0.array() < size.cast<double>().array() - margin).all() &&
+                      (g_end.array() < size.cast<double>().array() - margin).all();
+  float t = t1;
   int k = 1;
-  for (; k < n - 1 && t < free_until; ++k, t += dtf, pa += dta, pb += dtb, idx_m += didx_m) {
-    const int ka = std::min(std::max(static_cast<int>(pa), 0), na);
-    const int kb = std::min(std::max(static_cast<int>(pb), 0), nb);
-    put(idx_m + ka * sa + kb * sb, profile.free_log_odds);
-  }
-  for (; k < n - 1; ++k, t += dtf, pa += dta, pb += dtb, idx_m += didx_m) {
-    const int ka = std::min(std::max(static_cast<int>(pa), 0), na);
-    const int kb = std::min(std::max(static_cast<int>(pb), 0), nb);
-    put(idx_m + ka * sa + kb * sb, profile.at(t * cf));
+  if (inside) {
+    // The inner cells in four runs, by the offset u = l - l_p at their
+    // centre plane: free (u < front), rising (u < -c/2), peak (|u| <= c/2),
+    // falling (u > c/2). Free and peak cells share one value; in the rising
+    // and falling runs the table position moves by a constant step.
+    const float hc = profile.half_cell_m;
+    const int k_rise = k_free, k_peak = firstWith(-hc), k_fall = firstWith(hc);
+    const float dx = dtf * cf * profile.samples_per_m;
+    const float x_max = (LogOddsTable::kFrontSigmas + LogOddsTable::kTailSigmas) * LogOddsTable::kSamplesPerSigma;
+    auto sampleAt = [&](int kk, float e_shift) {  // table position of inner cell kk
+      return ((t1 + (kk - 1) * dtf) * cf - profile.l_p_m + e_shift - profile.row_origin_m) * profile.samples_per_m;
+    };
+    auto advance = [&]() {
+      pa += dta;
+      pb += dtb;
+      idx_m += didx_m;
+    };
+    for (; k < k_rise; ++k, advance())
+      put(idx_m + static_cast<int>(pa) * sa + static_cast<int>(pb) * sb, profile.free_log_odds);
+    float x = sampleAt(k, hc);
+    for (; k < k_peak; ++k, x += dx, advance())
+      put(idx_m + static_cast<int>(pa) * sa + static_cast<int>(pb) * sb, profile.sample(std::max(x, 0.0f)));
+    const float peak = profile.sample((-profile.row_origin_m) * profile.samples_per_m);
+    for (; k < k_fall; ++k, advance()) put(idx_m + static_cast<int>(pa) * sa + static_cast<int>(pb) * sb, peak);
+    x = sampleAt(k, -hc);
+    for (; k < n - 1; ++k, x += dx, advance())
+      put(idx_m + static_cast<int>(pa) * sa + static_cast<int>(pb) * sb, profile.sample(std::min(x, x_max)));
+  } else {
+    for (; k < n - 1; ++k, t += dtf, pa += dta, pb += dtb, idx_m += didx_m) {
+      const int ka = std::min(std::max(static_cast<int>(std::floor(pa)), 0), na);
+      const int kb = std::min(std::max(static_cast<int>(std::floor(pb)), 0), nb);
+      const int km = std::clamp(k0 + k * step, 0, nm);
+      put(km * stride[m] + ka * sa + kb * sb, k < k_free ? profile.free_log_odds : profile.at(t * cf));
+    }
   }
   endCell(k0 + (n - 1) * step, t0 + (n - 1) * dt);
   return static_cast<uint64_t>(n);

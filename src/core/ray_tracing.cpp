@@ -15,7 +15,7 @@ void RayTracer::traverse(const Eigen::Isometry3d& T_W_C, LocalGrid* grid, DrawSt
   const auto& cfg = camera_.config();
   const double c = grid->resolution();
   const double f = cfg.focal_length_px;
-  const double max_range = cfg.max_range_m;
+  const double max_range2 = cfg.max_range_m * cfg.max_range_m;
   const double u_lo = -0.5, u_hi = cfg.width_px - 0.5, v_lo = -0.5, v_hi = cfg.height_px - 0.5;
   const Eigen::Isometry3d T_C_W = T_W_C.inverse();
   const Eigen::Matrix3d R_C_W = T_C_W.linear();
@@ -36,11 +36,13 @@ void RayTracer::traverse(const Eigen::Isometry3d& T_W_C, LocalGrid* grid, DrawSt
       float* row = data + grid->linearIndex(0, y, z);
       for (int x = 0; x < size.x(); ++x, C_p += C_step_x) {
         if (C_p.z() <= 0.0) continue;
-        const double l = C_p.norm();  // step 2a
-        if (l > max_range) continue;
-        const double u = f * C_p.x() / C_p.z() + cfg.cx_px;  // step 2b
-        const double v = f * C_p.y() / C_p.z() + cfg.cy_px;
+        const double inv_z = 1.0 / C_p.z();
+        const double u = f * C_p.x() * inv_z + cfg.cx_px;  // step 2b
+        const double v = f * C_p.y() * inv_z + cfg.cy_px;
         if (!(u >= u_lo && u < u_hi && v >= v_lo && v < v_hi)) continue;
+        const double l2 = C_p.squaredNorm();  // step 2a
+        if (l2 > max_range2) continue;
+        const double l = std::sqrt(l2);
         const float d_hat = lookup(C_p, u, v, stats);  // step 2c
         if (d_hat < 0.0f) continue;                     // footprint without information
         const RangeProfile profile = pixelProfile(camera_, table_, u, v, d_hat);  // step 2d

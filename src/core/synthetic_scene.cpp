@@ -1,5 +1,6 @@
 #include "stereo_occupancy/synthetic_scene.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -103,6 +104,14 @@ cv::Mat table1Image(const StereoCameraModel& camera, Eigen::Isometry3d* T_W_C) {
   Eigen::Isometry3d pose;
   const SyntheticScene scene = table1Scene(&pose);
   cv::Mat image = renderDisparity(scene, camera, pose);
+  // Texture-less sky: unmatched (invalid) more than 60 px above the horizon,
+  // matched at zero disparity (infinitely far) below that.
+  const int sky_matched_from = static_cast<int>(camera.config().cy_px) - 60;
+  for (int y = 0; y < std::min(sky_matched_from, image.rows); ++y) {
+    float* row = image.ptr<float>(y);
+    for (int x = 0; x < image.cols; ++x)
+      if (row[x] == 0.0f) row[x] = std::numeric_limits<float>::quiet_NaN();
+  }
   addInvalidSpeckle(&image, 0.03, 42);
   // A texture-less patch on the ground where the matcher finds nothing.
   image(cv::Rect(380, 400, 120, 50)).setTo(std::numeric_limits<float>::quiet_NaN());
