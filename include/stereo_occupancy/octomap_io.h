@@ -16,7 +16,9 @@ namespace stereo_occupancy {
 std::unique_ptr<octomap::OcTree> localGridToOcTree(const LocalGrid& grid);
 
 /// Writes @p tree to @p path: ".ot" keeps the log-odds (octomap::AbstractOcTree::write),
-/// ".bt" keeps occupied / free only (writeBinary). @throws std::runtime_error.
+/// ".bt" keeps occupied / free only (writeBinary). Atomic: written to a
+/// temporary file in the same directory, then renamed into place.
+/// @throws std::runtime_error.
 void writeOcTree(const octomap::OcTree& tree, const std::string& path);
 
 }  // namespace stereo_occupancy

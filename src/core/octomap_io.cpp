@@ -1,5 +1,8 @@
 #include "stereo_occupancy/octomap_io.h"
 
+#include <unistd.h>
+
+#include <cstdio>
 #include <stdexcept>
 
 namespace stereo_occupancy {
@@ -26,19 +29,21 @@ std::unique_ptr<octomap::OcTree> localGridToOcTree(const LocalGrid& grid) {
 }
 
 void writeOcTree(const octomap::OcTree& tree, const std::string& path) {
-  auto ends = [&](const char* s) {
-    const std::string suffix(s);
-    return path.size() >= suffix.size() && path.compare(path.size() - suffix.size(), suffix.size(), suffix) == 0;
-  };
-  bool ok = false;
-  if (ends(".ot")) {
-    ok = tree.write(path);
-  } else if (ends(".bt")) {
-    ok = tree.writeBinaryConst(path);
-  } else {
-    throw std::runtime_error("'" + path + "': the map file must end in .ot or .bt");
+  const bool full = path.size() >= 3 && path.compare(path.size() - 3, 3, ".ot") == 0;
+  const bool binary = path.size() >= 3 && path.compare(path.size() - 3, 3, ".bt") == 0;
+  if (!full && !binary) throw std::runtime_error("'" + path + "': the map file must end in .ot or .bt");
+  // Write a temporary file beside the target, then rename it into place: a
+  // crash or kill during the write leaves the previous file intact.
+  const std::string tmp = path + ".tmp" + std::to_string(::getpid());
+  const bool ok = full ? tree.write(tmp) : tree.writeBinaryConst(tmp);
+  if (!ok) {
+    std::remove(tmp.c_str());
+    throw std::runtime_error("cannot write '" + path + "'");
   }
-  if (!ok) throw std::runtime_error("cannot write '" + path + "'");
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    std::remove(tmp.c_str());
+    throw std::runtime_error("cannot rename '" + tmp + "' to '" + path + "'");
+  }
 }
 
 }  // namespace stereo_occupancy

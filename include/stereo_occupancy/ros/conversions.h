@@ -1,0 +1,58 @@
+#pragma once
+/// @file
+/// The one place that converts between ROS messages and core types.
+
+#include <geometry_msgs/TransformStamped.h>
+#include <octomap/OcTree.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <stereo_msgs/DisparityImage.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include <Eigen/Geometry>
+#include <string>
+
+#include "stereo_occupancy/Octomap.h"
+#include "stereo_occupancy/OccupancyUpdate.h"
+#include "stereo_occupancy/grid_update.h"
+#include "stereo_occupancy/local_grid.h"
+#include "stereo_occupancy/ros/parameters.h"
+#include "stereo_occupancy/stereo_camera_model.h"
+
+namespace stereo_occupancy {
+
+/// The camera of a DisparityImage: f and T (baseline) and the valid disparity
+/// interval from the message, the size from its image, Δd = max(delta_d_px,
+/// the message's delta_d), the principal point from @p info when given, else
+/// from the parameters (or the image centre), range limits from the
+/// parameters. False, with the reason, if the message's numbers are unusable.
+bool cameraFromDisparityImage(const stereo_msgs::DisparityImage& msg, const sensor_msgs::CameraInfo* info,
+                              const DisparityMapperParameters& params, StereoCameraConfig* camera, std::string* why);
+
+/// The camera of a depth image: f, cx, cy from @p info, b from the parameters.
+bool cameraFromDepthInfo(const sensor_msgs::CameraInfo& info, const DisparityMapperParameters& params,
+                         StereoCameraConfig* camera, std::string* why);
+
+/// T_W_C from a tf2 transform of the camera frame into the world frame; false
+/// if it is not finite or its quaternion is not of unit norm (±1e-3).
+bool poseFromTransform(const geometry_msgs::TransformStamped& transform, Eigen::Isometry3d* T_W_C);
+
+void toMsg(const GridUpdate& update, const std_msgs::Header& header, OccupancyUpdate* msg);
+/// False (with the reason) if the message's sizes or values do not fit together.
+bool fromMsg(const OccupancyUpdate& msg, GridUpdate* update, std::string* why);
+
+/// The tree as an octomap_msgs/Octomap-compatible message: binary (.bt
+/// content) or full (.ot content, log-odds).
+void toMsg(const octomap::OcTree& tree, bool binary, const std_msgs::Header& header, Octomap* msg);
+
+/// Occupied leaves as cube lists, one marker per leaf size, coloured by height.
+void occupiedCellMarkers(const octomap::OcTree& tree, const std_msgs::Header& header,
+                         visualization_msgs::MarkerArray* markers);
+
+/// Centres of the occupied leaves as an XYZ cloud.
+void occupiedCellCloud(const octomap::OcTree& tree, const std_msgs::Header& header, sensor_msgs::PointCloud2* cloud);
+
+/// Centres of a local grid's cells with positive log-odds as an XYZ + intensity (log-odds) cloud.
+void occupiedCellCloud(const LocalGrid& grid, const std_msgs::Header& header, sensor_msgs::PointCloud2* cloud);
+
+}  // namespace stereo_occupancy

@@ -1,0 +1,86 @@
+#include "stereo_occupancy/map_accumulator.h"
+
+#include <cmath>
+#include <stdexcept>
+
+#include "stereo_occupancy/octomap_io.h"
+
+namespace stereo_occupancy {
+
+bool MapAccumulatorConfig::isValid(std::string* why) const {
+  auto fail = [why](const char* text) {
+    if (why) *why = text;
+    return false;
+  };
+  if (!(std::isfinite(resolution_m) && resolution_m >= 0.01 && resolution_m <= 10.0))
+    return fail("resolution_m must be in [0.01, 10]");
+  if (!(clamping_min_prob > 0.0 && clamping_min_prob < 0.5)) return fail("clamping_min_prob must be in (0, 0.5)");
+  if (!(clamping_max_prob > 0.5 && clamping_max_prob < 1.0)) return fail("clamping_max_prob must be in (0.5, 1)");
+  if (!(occupancy_threshold_prob > clamping_min_prob && occupancy_threshold_prob < clamping_max_prob))
+    return fail("occupancy_threshold_prob must be in (clamping_min_prob, clamping_max_prob)");
+  if (!(std::isfinite(max_extent_m) && max_extent_m >= 0.0)) return fail("max_extent_m must be finite and >= 0");
+  return true;
+}
+
+MapAccumulator::MapAccumulator(const MapAccumulatorConfig& config) : config_(config) {
+  std::string why;
+  if (!config_.isValid(&why)) throw std::invalid_argument(why);
+  reset();
+}
+
+void MapAccumulator::applyThresholds() {
+  tree_->setClampingThresMin(config_.clamping_min_prob);
+  tree_->setClampingThresMax(config_.clamping_max_prob);
+  tree_->setOccupancyThres(config_.occupancy_threshold_prob);
+}
+
+void MapAccumulator::reset() {
+  tree_ = std::make_unique<octomap::OcTree>(config_.resolution_m);
+  applyThresholds();
+  updates_ = 0;
+}
+
+bool MapAccumulator::integrate(const GridUpdate& update, std::string* why) {
+  if (!update.isConsistent(why)) return false;
+  if (std::abs(update.resolution_m - config_.resolution_m) > 1e-9 * config_.resolution_m) {
+    if (why)
+      *why = "update resolution " + std::to_string(update.resolution_m) + " m differs from the map's " +
+             std::to_string(config_.resolution_m) + " m";
+    return false;
+  }
+  const int offset = static_cast<int>(tree_->coordToKey(0.0));  // key of global index 0
+  update.forEachCell([&](const Eigen::Vector3i& g, float log_odds) {
+    const Eigen::Vector3i k = g.array() + offset;
+    if ((k.array() < 0).any() || (k.array() > 65535).any()) return;  // outside OcTree's extent
+    tree_->updateNode(octomap::OcTreeKey(k.x(), k.y(), k.z()), log_odds, /*lazy_eval=*/true);
+  });
+  tree_->updateInnerOccupancy();
+  W_last_origin_ = update.W_sensor_origin;
+  ++updates_;
+  return true;
+}
+
+size_t MapAccumulator::prune() {
+  if (config_.max_extent_m <= 0.0) return 0;
+  std::vector<octomap::OcTreeKey> outside;
+  std::vector<unsigned> depths;
+  const Eigen::Array3d lo = (W_last_origin_.array() - config_.max_extent_m);
+  const Eigen::Array3d hi = (W_last_origin_.array() + config_.max_extent_m);
+  for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it) {
+    const Eigen::Array3d p(it.getX(), it.getY(), it.getZ());
+    if ((p < lo).any() || (p > hi).any()) {
+      outside.push_back(it.getKey());
+      depths.push_back(it.getDepth());
+    }
+  }
+  for (size_t i = 0; i < outside.size(); ++i) tree_->deleteNode(outside[i], depths[i]);
+  return outside.size();
+}
+
+std::vector<std::string> MapAccumulator::save(const std::string& directory, const std::string& base_name) const {
+  std::vector<std::string> paths = {directory + "/" + base_name + ".bt", directory + "/" + base_name + ".ot"};
+  for (const auto& p : paths) writeOcTree(*tree_, p);
+  return paths;
+}
+
+}  // namespace stereo_occupancy

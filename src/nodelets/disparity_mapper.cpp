@@ -1,0 +1,335 @@
+// stereo_occupancy/DisparityMapper: disparity image + tf -> occupancy update.
+//
+// ROS glue only: parameters come from ros/parameters, messages are converted
+// in ros/conversions, all drawing is the core's DisparityDrawer.
+
+#include <cv_bridge/cv_bridge.h>
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <diagnostic_updater/update_functions.h>
+#include <dynamic_reconfigure/server.h>
+#include <image_transport/image_transport.h>
+#include <image_transport/subscriber_filter.h>
+#include <message_filters/subscriber.h>
+#include <nodelet/nodelet.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/ros.h>
+#include <sensor_msgs/image_encodings.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/message_filter.h>
+#include <tf2_ros/transform_listener.h>
+
+#include <boost/bind/bind.hpp>
+
+#include <chrono>
+#include <memory>
+#include <mutex>
+
+#include "stereo_occupancy/DisparityMapperConfig.h"
+#include "stereo_occupancy/disparity_drawer.h"
+#include "stereo_occupancy/disparity_io.h"
+#include "stereo_occupancy/grid_update.h"
+#include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/ros/parameters.h"
+
+namespace stereo_occupancy {
+
+class DisparityMapper : public nodelet::Nodelet {
+ private:
+  void onInit() override;
+
+  void disparityCallback(const stereo_msgs::DisparityImageConstPtr& msg);
+  void depthCallback(const sensor_msgs::ImageConstPtr& msg);
+  void cameraInfoCallback(const sensor_msgs::CameraInfoConstPtr& msg);
+  template <class M>
+  void transformFailure(const boost::shared_ptr<const M>& msg, tf2_ros::FilterFailureReason reason);
+  void reconfigure(DisparityMapperConfig& config, uint32_t level);
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
+
+  /// Draws one image (CV_32FC1 disparity) and publishes the update.
+  void process(const cv::Mat& disparity, const std_msgs::Header& header, const StereoCameraConfig& camera);
+
+  DisparityMapperParameters params_;
+
+  // Everything below is guarded by mutex_: a nodelet's callbacks may run on
+  // several threads of the manager's pool at once.
+  std::mutex mutex_;
+  std::unique_ptr<DisparityDrawer> drawer_;  ///< rebuilt when the camera or drawing config changes
+  LocalGrid grid_;
+  GridUpdate update_;
+  sensor_msgs::CameraInfoConstPtr camera_info_;
+  uint64_t images_received_ = 0, images_processed_ = 0, dropped_no_transform_ = 0, dropped_invalid_ = 0;
+  double last_processing_ms_ = 0.0, max_processing_ms_ = 0.0;
+  std::string last_problem_;
+
+  std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
+  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
+  message_filters::Subscriber<stereo_msgs::DisparityImage> disparity_sub_;
+  std::unique_ptr<tf2_ros::MessageFilter<stereo_msgs::DisparityImage>> disparity_filter_;
+  std::unique_ptr<image_transport::ImageTransport> image_transport_;
+  image_transport::SubscriberFilter depth_sub_;
+  std::unique_ptr<tf2_ros::MessageFilter<sensor_msgs::Image>> depth_filter_;
+  ros::Subscriber camera_info_sub_;
+  ros::Publisher update_pub_;
+  ros::Publisher cloud_pub_;
+  ros::Publisher disparity_image_pub_;  ///< the input's image, for rviz, only while watched
+
+  boost::recursive_mutex reconfigure_mutex_;
+  std::unique_ptr<dynamic_reconfigure::Server<DisparityMapperConfig>> reconfigure_server_;
+  std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
+  double min_rate_hz_ = 1.0, max_rate_hz_ = 100.0;
+  std::unique_ptr<diagnostic_updater::FrequencyStatus> input_rate_;
+  ros::Timer diagnostics_timer_;
+};
+
+void DisparityMapper::onInit() {
+  using boost::placeholders::_1;
+  using boost::placeholders::_2;
+  ros::NodeHandle& nh = getNodeHandle();
+  ros::NodeHandle& pnh = getPrivateNodeHandle();
+
+  std::string why;
+  if (!loadParameters(pnh, &params_, &why)) {
+    // Refuse to start: no subscription, no output. The manager and its other
+    // nodelets keep running.
+    NODELET_FATAL("invalid parameter: %s; DisparityMapper does not start", why.c_str());
+    return;
+  }
+
+  tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
+  tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
+
+  update_pub_ = nh.advertise<OccupancyUpdate>("occupancy_update", 5);
+  cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("local_grid_cloud", 1);
+  disparity_image_pub_ = nh.advertise<sensor_msgs::Image>("disparity_image", 1);
+
+  if (params_.use_depth) {
+    image_transport_ = std::make_unique<image_transport::ImageTransport>(nh);
+    depth_sub_.subscribe(*image_transport_, "depth", params_.queue_size);
+    depth_filter_ = std::make_unique<tf2_ros::MessageFilter<sensor_msgs::Image>>(
+        depth_sub_, *tf_buffer_, params_.world_frame, params_.queue_size, nh);
+    depth_filter_->registerCallback(boost::bind(&DisparityMapper::depthCallback, this, _1));
+    depth_filter_->registerFailureCallback(
+        boost::bind(&DisparityMapper::transformFailure<sensor_msgs::Image>, this, _1, _2));
+    camera_info_sub_ = nh.subscribe("camera_info", 1, &DisparityMapper::cameraInfoCallback, this);
+  } else {
+    disparity_sub_.subscribe(nh, "disparity", params_.queue_size);
+    disparity_filter_ = std::make_unique<tf2_ros::MessageFilter<stereo_msgs::DisparityImage>>(
+        disparity_sub_, *tf_buffer_, params_.world_frame, params_.queue_size, nh);
+    disparity_filter_->registerCallback(boost::bind(&DisparityMapper::disparityCallback, this, _1));
+    disparity_filter_->registerFailureCallback(
+        boost::bind(&DisparityMapper::transformFailure<stereo_msgs::DisparityImage>, this, _1, _2));
+    // Optional: the principal point of the rectified left camera.
+    camera_info_sub_ = nh.subscribe("camera_info", 1, &DisparityMapper::cameraInfoCallback, this);
+  }
+
+  reconfigure_server_ = std::make_unique<dynamic_reconfigure::Server<DisparityMapperConfig>>(reconfigure_mutex_, pnh);
+  DisparityMapperConfig initial;
+  initial.algorithm = toString(params_.drawing.algorithm);
+  initial.max_range_m = params_.camera.max_range_m;
+  initial.min_range_m = params_.camera.min_range_m;
+  initial.delta_d_px = params_.camera.delta_d_px;
+  initial.k_m = params_.drawing.sensor_model.k_m;
+  initial.p_min = params_.drawing.sensor_model.p_min;
+  initial.p_max = params_.drawing.sensor_model.p_max;
+  initial.sigma_trans_m = params_.drawing.blur.sigma_trans_m;
+  initial.sigma_angle_rad = params_.drawing.blur.sigma_angle_rad;
+  {
+    boost::recursive_mutex::scoped_lock lock(reconfigure_mutex_);
+    reconfigure_server_->updateConfig(initial);
+  }
+  reconfigure_server_->setCallback(boost::bind(&DisparityMapper::reconfigure, this, _1, _2));
+
+  diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
+  diagnostics_->setHardwareID("stereo_occupancy");
+  input_rate_ = std::make_unique<diagnostic_updater::FrequencyStatus>(
+      diagnostic_updater::FrequencyStatusParam(&min_rate_hz_, &max_rate_hz_, 0.1, 10));
+  diagnostics_->add(*input_rate_);
+  diagnostics_->add("mapper", this, &DisparityMapper::diagnose);
+  diagnostics_timer_ = nh.createTimer(ros::Duration(1.0), [this](const ros::TimerEvent&) { diagnostics_->update(); });
+
+  NODELET_INFO("DisparityMapper: %s at %.3g m cells into frame '%s', range %.3g m, from '%s'",
+               toString(params_.drawing.algorithm), params_.drawing.resolution_m, params_.world_frame.c_str(),
+               params_.camera.max_range_m,
+               params_.use_depth ? nh.resolveName("depth").c_str() : nh.resolveName("disparity").c_str());
+}
+
+void DisparityMapper::reconfigure(DisparityMapperConfig& config, uint32_t /*level*/) {
+  DisparityMapperParameters next = params_;
+  parseDrawingAlgorithm(config.algorithm, &next.drawing.algorithm);
+  next.camera.max_range_m = config.max_range_m;
+  next.camera.min_range_m = config.min_range_m;
+  next.camera.delta_d_px = config.delta_d_px;
+  next.drawing.sensor_model.k_m = config.k_m;
+  next.drawing.sensor_model.p_min = config.p_min;
+  next.drawing.sensor_model.p_max = config.p_max;
+  next.drawing.blur.sigma_trans_m = config.sigma_trans_m;
+  next.drawing.blur.sigma_angle_rad = config.sigma_angle_rad;
+  std::string why;
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!next.isValid(&why)) {
+    NODELET_WARN("dynamic_reconfigure: %s; keeping the previous values", why.c_str());
+    return;
+  }
+  params_ = next;
+  drawer_.reset();  // rebuilt with the new tables on the next image
+}
+
+void DisparityMapper::cameraInfoCallback(const sensor_msgs::CameraInfoConstPtr& msg) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  camera_info_ = msg;
+}
+
+template <class M>
+void DisparityMapper::transformFailure(const boost::shared_ptr<const M>& msg, tf2_ros::FilterFailureReason reason) {
+  const char* what = reason == tf2_ros::filter_failure_reasons::OutTheBack     ? "older than the tf cache"
+                     : reason == tf2_ros::filter_failure_reasons::EmptyFrameID ? "empty frame_id"
+                                                                               : "no transform in time";
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++dropped_no_transform_;
+    last_problem_ = std::string("dropped an image: ") + what;
+  }
+  NODELET_WARN_THROTTLE(5.0, "dropped an image from '%s' at %.3f: %s (to '%s')", msg->header.frame_id.c_str(),
+                        msg->header.stamp.toSec(), what, params_.world_frame.c_str());
+}
+
+void DisparityMapper::disparityCallback(const stereo_msgs::DisparityImageConstPtr& msg) {
+  input_rate_->tick();
+  sensor_msgs::CameraInfoConstPtr info;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++images_received_;
+    info = camera_info_;
+  }
+  auto refuse = [&](const std::string& why) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++dropped_invalid_;
+    last_problem_ = why;
+    NODELET_WARN_THROTTLE(5.0, "refused a disparity image: %s", why.c_str());
+  };
+  if (msg->image.encoding != sensor_msgs::image_encodings::TYPE_32FC1)
+    return refuse("encoding '" + msg->image.encoding + "', expected 32FC1");
+  if (static_cast<uint64_t>(msg->image.width) * msg->image.height > static_cast<uint64_t>(params_.max_image_pixels))
+    return refuse("image larger than max_image_pixels");
+  if (msg->image.step < msg->image.width * 4 ||
+      msg->image.data.size() < static_cast<size_t>(msg->image.step) * msg->image.height || msg->image.width == 0)
+    return refuse("image size and data do not fit together");
+  StereoCameraConfig camera;
+  std::string why;
+  if (!cameraFromDisparityImage(*msg, info.get(), params_, &camera, &why)) return refuse(why);
+  cv_bridge::CvImageConstPtr image;
+  try {
+    image = cv_bridge::toCvShare(msg->image, msg);  // a view of the message's data, no copy
+  } catch (const cv_bridge::Exception& e) {
+    return refuse(e.what());
+  }
+  process(image->image, msg->header, camera);
+  if (disparity_image_pub_.getNumSubscribers() > 0)
+    disparity_image_pub_.publish(boost::make_shared<sensor_msgs::Image>(msg->image));  // a copy, only for viewers
+}
+
+void DisparityMapper::depthCallback(const sensor_msgs::ImageConstPtr& msg) {
+  input_rate_->tick();
+  sensor_msgs::CameraInfoConstPtr info;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++images_received_;
+    info = camera_info_;
+  }
+  auto refuse = [&](const std::string& why) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++dropped_invalid_;
+    last_problem_ = why;
+    NODELET_WARN_THROTTLE(5.0, "refused a depth image: %s", why.c_str());
+  };
+  if (!info) return refuse("no camera_info received yet");
+  if (info->width != msg->width || info->height != msg->height) return refuse("camera_info size differs");
+  if (static_cast<uint64_t>(msg->width) * msg->height > static_cast<uint64_t>(params_.max_image_pixels))
+    return refuse("image larger than max_image_pixels");
+  StereoCameraConfig camera;
+  std::string why;
+  if (!cameraFromDepthInfo(*info, params_, &camera, &why)) return refuse(why);
+  cv::Mat disparity;
+  try {
+    const cv_bridge::CvImageConstPtr depth = cv_bridge::toCvShare(msg);
+    depthToDisparity(depth->image, camera.baseline_m * camera.focal_length_px, &disparity);
+  } catch (const std::exception& e) {
+    return refuse(e.what());
+  }
+  process(disparity, msg->header, camera);
+}
+
+void DisparityMapper::process(const cv::Mat& disparity, const std_msgs::Header& header,
+                              const StereoCameraConfig& camera) {
+  // The image waited in the tf filter until its pose was known; a pose that
+  // came more than tf_timeout_s after the image makes it too old to use.
+  const double age_s = (ros::Time::now() - header.stamp).toSec();
+  if (params_.tf_timeout_s > 0.0 && age_s > params_.tf_timeout_s) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++dropped_no_transform_;
+    last_problem_ = "transform came " + std::to_string(age_s) + " s after the image (tf_timeout_s)";
+    NODELET_WARN_THROTTLE(5.0, "dropped an image: %s", last_problem_.c_str());
+    return;
+  }
+  geometry_msgs::TransformStamped transform;
+  try {
+    transform = tf_buffer_->lookupTransform(params_.world_frame, header.frame_id, header.stamp);
+  } catch (const tf2::TransformException& e) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++dropped_no_transform_;
+    last_problem_ = e.what();
+    NODELET_WARN_THROTTLE(5.0, "no transform for an image: %s", e.what());
+    return;
+  }
+  Eigen::Isometry3d T_W_C;
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!poseFromTransform(transform, &T_W_C)) {
+    ++dropped_invalid_;
+    last_problem_ = "camera pose is not finite or its quaternion not of unit norm";
+    NODELET_WARN_THROTTLE(5.0, "refused an image: %s", last_problem_.c_str());
+    return;
+  }
+  const auto start = std::chrono::steady_clock::now();
+  try {
+    if (!drawer_ || drawer_->camera().config() != camera)
+      drawer_ = std::make_unique<DisparityDrawer>(camera, params_.drawing);  // builds the lookup tables
+    drawer_->draw(disparity, T_W_C, &grid_);
+  } catch (const std::exception& e) {
+    ++dropped_invalid_;
+    last_problem_ = e.what();
+    NODELET_WARN_THROTTLE(5.0, "refused an image: %s", e.what());
+    return;
+  }
+  encodeGridUpdate(grid_, T_W_C.translation(), &update_);
+  auto msg = boost::make_shared<OccupancyUpdate>();
+  std_msgs::Header out_header = header;
+  out_header.frame_id = params_.world_frame;
+  toMsg(update_, out_header, msg.get());
+  update_pub_.publish(msg);  // as Ptr: no copy to nodelets in the same manager
+  if (cloud_pub_.getNumSubscribers() > 0) {
+    auto cloud = boost::make_shared<sensor_msgs::PointCloud2>();
+    occupiedCellCloud(grid_, out_header, cloud.get());
+    cloud_pub_.publish(cloud);
+  }
+  last_processing_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  max_processing_ms_ = std::max(max_processing_ms_, last_processing_ms_);
+  ++images_processed_;
+}
+
+void DisparityMapper::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const bool dropping = dropped_no_transform_ + dropped_invalid_ > 0;
+  status.summary(dropping ? diagnostic_msgs::DiagnosticStatus::WARN : diagnostic_msgs::DiagnosticStatus::OK,
+                 dropping ? last_problem_ : "mapping");
+  status.add("algorithm", toString(params_.drawing.algorithm));
+  status.add("images received", images_received_);
+  status.add("images processed", images_processed_);
+  status.add("dropped: no transform", dropped_no_transform_);
+  status.add("dropped: invalid input", dropped_invalid_);
+  status.add("last processing time [ms]", last_processing_ms_);
+  status.add("max processing time [ms]", max_processing_ms_);
+}
+
+}  // namespace stereo_occupancy
+
+PLUGINLIB_EXPORT_CLASS(stereo_occupancy::DisparityMapper, nodelet::Nodelet)

@@ -1,0 +1,193 @@
+// stereo_occupancy/OctomapAccumulator: occupancy updates -> one OctoMap,
+// published for visualisation and saved on request.
+//
+// ROS glue only: the fusion is the core's MapAccumulator.
+
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <nodelet/nodelet.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/ros.h>
+#include <std_srvs/Empty.h>
+#include <std_srvs/Trigger.h>
+
+#include <chrono>
+#include <memory>
+#include <mutex>
+
+#include "stereo_occupancy/map_accumulator.h"
+#include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/ros/parameters.h"
+
+namespace stereo_occupancy {
+
+class OctomapAccumulator : public nodelet::Nodelet {
+ public:
+  ~OctomapAccumulator() override;
+
+ private:
+  void onInit() override;
+  void updateCallback(const OccupancyUpdateConstPtr& msg);
+  void publish(const ros::TimerEvent&);
+  bool saveMap(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response);
+  bool reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
+  std::vector<std::string> save();  ///< requires mutex_
+
+  OctomapAccumulatorParameters params_;
+
+  // Everything below is guarded by mutex_ (callbacks may run on several threads).
+  std::mutex mutex_;
+  std::unique_ptr<MapAccumulator> map_;
+  std::string frame_id_;
+  ros::Time last_stamp_;
+  ros::WallTime last_prune_;
+  uint64_t updates_received_ = 0, updates_refused_ = 0, leaves_pruned_ = 0;
+  double last_fusion_ms_ = 0.0, max_fusion_ms_ = 0.0;
+  std::string last_problem_;
+  bool changed_since_publish_ = true;
+
+  ros::Subscriber update_sub_;
+  ros::Publisher octomap_pub_, markers_pub_, cloud_pub_;
+  ros::ServiceServer save_srv_, reset_srv_;
+  ros::Timer publish_timer_, diagnostics_timer_;
+  std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
+};
+
+void OctomapAccumulator::onInit() {
+  ros::NodeHandle& nh = getNodeHandle();
+  ros::NodeHandle& pnh = getPrivateNodeHandle();
+  std::string why;
+  if (!loadParameters(pnh, &params_, &why)) {
+    NODELET_FATAL("invalid parameter: %s; OctomapAccumulator does not start", why.c_str());
+    return;
+  }
+  map_ = std::make_unique<MapAccumulator>(params_.map);
+  last_prune_ = ros::WallTime::now();
+
+  octomap_pub_ = nh.advertise<Octomap>("octomap_binary", 1, /*latch=*/true);
+  markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>("occupied_cells_vis_array", 1, /*latch=*/true);
+  cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("octomap_point_cloud_centers", 1, /*latch=*/true);
+  update_sub_ = nh.subscribe("occupancy_update", 10, &OctomapAccumulator::updateCallback, this);
+  save_srv_ = pnh.advertiseService("save_map", &OctomapAccumulator::saveMap, this);
+  reset_srv_ = pnh.advertiseService("reset", &OctomapAccumulator::reset, this);
+  publish_timer_ = nh.createTimer(ros::Duration(1.0 / params_.publish_rate_hz), &OctomapAccumulator::publish, this);
+
+  diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
+  diagnostics_->setHardwareID("stereo_occupancy");
+  diagnostics_->add("accumulator", this, &OctomapAccumulator::diagnose);
+  diagnostics_timer_ = nh.createTimer(ros::Duration(1.0), [this](const ros::TimerEvent&) { diagnostics_->update(); });
+
+  NODELET_INFO("OctomapAccumulator: %.3g m cells, map kept within %.0f m of the sensor, saving to '%s'",
+               params_.map.resolution_m, params_.map.max_extent_m,
+               params_.save_dir.empty() ? "(nowhere)" : params_.save_dir.c_str());
+}
+
+OctomapAccumulator::~OctomapAccumulator() {
+  if (!map_ || params_.save_dir.empty()) return;
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (map_->updates() == 0) return;
+  try {
+    for (const auto& path : save()) ROS_INFO("OctomapAccumulator: saved the map to %s on shutdown", path.c_str());
+  } catch (const std::exception& e) {
+    ROS_ERROR("OctomapAccumulator: could not save the map on shutdown: %s", e.what());
+  }
+}
+
+void OctomapAccumulator::updateCallback(const OccupancyUpdateConstPtr& msg) {
+  GridUpdate update;
+  std::string why;
+  const bool ok = fromMsg(*msg, &update, &why);
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++updates_received_;
+  const auto start = std::chrono::steady_clock::now();
+  if (!ok || !map_->integrate(update, &why)) {
+    ++updates_refused_;
+    last_problem_ = why;
+    NODELET_WARN_THROTTLE(5.0, "refused an occupancy update: %s", why.c_str());
+    return;
+  }
+  last_fusion_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  max_fusion_ms_ = std::max(max_fusion_ms_, last_fusion_ms_);
+  frame_id_ = msg->header.frame_id;
+  last_stamp_ = msg->header.stamp;
+  changed_since_publish_ = true;
+  if ((ros::WallTime::now() - last_prune_).toSec() > params_.prune_period_s) {
+    leaves_pruned_ += map_->prune();
+    last_prune_ = ros::WallTime::now();
+  }
+}
+
+void OctomapAccumulator::publish(const ros::TimerEvent&) {
+  const bool want_map = octomap_pub_.getNumSubscribers() > 0;
+  const bool want_markers = markers_pub_.getNumSubscribers() > 0;
+  const bool want_cloud = cloud_pub_.getNumSubscribers() > 0;
+  if (!want_map && !want_markers && !want_cloud) return;
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!changed_since_publish_ || frame_id_.empty()) return;
+  changed_since_publish_ = false;
+  std_msgs::Header header;
+  header.frame_id = frame_id_;
+  header.stamp = last_stamp_;
+  const octomap::OcTree& tree = map_->tree();
+  if (want_map) {
+    auto msg = boost::make_shared<Octomap>();
+    toMsg(tree, /*binary=*/true, header, msg.get());
+    octomap_pub_.publish(msg);
+  }
+  if (want_markers) {
+    auto msg = boost::make_shared<visualization_msgs::MarkerArray>();
+    occupiedCellMarkers(tree, header, msg.get());
+    markers_pub_.publish(msg);
+  }
+  if (want_cloud) {
+    auto msg = boost::make_shared<sensor_msgs::PointCloud2>();
+    occupiedCellCloud(tree, header, msg.get());
+    cloud_pub_.publish(msg);
+  }
+}
+
+std::vector<std::string> OctomapAccumulator::save() { return map_->save(params_.save_dir, params_.map_name); }
+
+bool OctomapAccumulator::saveMap(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response) {
+  if (params_.save_dir.empty()) {
+    response.success = false;
+    response.message = "save_dir is not set";
+    return true;
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  try {
+    const auto paths = save();
+    response.success = true;
+    response.message = paths[0] + " " + paths[1];
+    NODELET_INFO("saved the map: %s", response.message.c_str());
+  } catch (const std::exception& e) {
+    response.success = false;
+    response.message = e.what();
+    NODELET_ERROR("could not save the map: %s", e.what());
+  }
+  return true;
+}
+
+bool OctomapAccumulator::reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  map_->reset();
+  changed_since_publish_ = true;
+  NODELET_INFO("map reset");
+  return true;
+}
+
+void OctomapAccumulator::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  status.summary(updates_refused_ > 0 ? diagnostic_msgs::DiagnosticStatus::WARN : diagnostic_msgs::DiagnosticStatus::OK,
+                 updates_refused_ > 0 ? last_problem_ : "accumulating");
+  status.add("updates received", updates_received_);
+  status.add("updates refused", updates_refused_);
+  status.add("leaves", map_->tree().getNumLeafNodes());
+  status.add("leaves pruned (max_extent_m)", leaves_pruned_);
+  status.add("last fusion time [ms]", last_fusion_ms_);
+  status.add("max fusion time [ms]", max_fusion_ms_);
+}
+
+}  // namespace stereo_occupancy
+
+PLUGINLIB_EXPORT_CLASS(stereo_occupancy::OctomapAccumulator, nodelet::Nodelet)

@@ -1,0 +1,222 @@
+#include "stereo_occupancy/ros/conversions.h"
+
+#include <sensor_msgs/point_cloud2_iterator.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <sstream>
+
+namespace stereo_occupancy {
+
+bool cameraFromDisparityImage(const stereo_msgs::DisparityImage& msg, const sensor_msgs::CameraInfo* info,
+                              const DisparityMapperParameters& params, StereoCameraConfig* camera, std::string* why) {
+  StereoCameraConfig c = params.camera;
+  c.width_px = static_cast<int>(msg.image.width);
+  c.height_px = static_cast<int>(msg.image.height);
+  c.focal_length_px = msg.f;
+  c.baseline_m = msg.T;
+  c.delta_d_px = std::max(params.camera.delta_d_px, static_cast<double>(msg.delta_d));
+  c.min_disparity_px = std::max(0.0, static_cast<double>(msg.min_disparity));
+  c.max_disparity_px = msg.max_disparity > msg.min_disparity ? static_cast<double>(msg.max_disparity)
+                                                             : std::numeric_limits<double>::infinity();
+  if (info && info->width == msg.image.width && info->height == msg.image.height && info->P[0] > 0.0) {
+    c.cx_px = info->P[2];
+    c.cy_px = info->P[6];
+  } else {
+    c.cx_px = params.cx_px >= 0.0 ? params.cx_px : 0.5 * (c.width_px - 1);
+    c.cy_px = params.cy_px >= 0.0 ? params.cy_px : 0.5 * (c.height_px - 1);
+  }
+  if (!std::isfinite(msg.delta_d) || msg.delta_d < 0.0f) {
+    if (why) *why = "delta_d is not finite and >= 0";
+    return false;
+  }
+  std::string reason;
+  if (!c.isValid(&reason)) {
+    if (why) *why = "camera from the message: " + reason + " (f = " + std::to_string(msg.f) +
+                    " px, T = " + std::to_string(msg.T) + " m)";
+    return false;
+  }
+  *camera = c;
+  return true;
+}
+
+bool cameraFromDepthInfo(const sensor_msgs::CameraInfo& info, const DisparityMapperParameters& params,
+                         StereoCameraConfig* camera, std::string* why) {
+  StereoCameraConfig c = params.camera;
+  c.width_px = static_cast<int>(info.width);
+  c.height_px = static_cast<int>(info.height);
+  const bool rectified = info.P[0] > 0.0;
+  c.focal_length_px = rectified ? info.P[0] : info.K[0];
+  c.cx_px = rectified ? info.P[2] : info.K[2];
+  c.cy_px = rectified ? info.P[6] : info.K[5];
+  c.baseline_m = params.depth_baseline_m;
+  std::string reason;
+  if (!c.isValid(&reason)) {
+    if (why) *why = "camera from camera_info: " + reason;
+    return false;
+  }
+  *camera = c;
+  return true;
+}
+
+bool poseFromTransform(const geometry_msgs::TransformStamped& transform, Eigen::Isometry3d* T_W_C) {
+  const auto& t = transform.transform.translation;
+  const auto& q = transform.transform.rotation;
+  const Eigen::Quaterniond quat(q.w, q.x, q.y, q.z);
+  const Eigen::Vector3d trans(t.x, t.y, t.z);
+  if (!trans.allFinite() || !quat.coeffs().allFinite() || std::abs(quat.norm() - 1.0) > 1e-3) return false;
+  T_W_C->setIdentity();
+  T_W_C->linear() = quat.normalized().toRotationMatrix();
+  T_W_C->translation() = trans;
+  return true;
+}
+
+void toMsg(const GridUpdate& update, const std_msgs::Header& header, OccupancyUpdate* msg) {
+  msg->header = header;
+  msg->sensor_origin.x = update.W_sensor_origin.x();
+  msg->sensor_origin.y = update.W_sensor_origin.y();
+  msg->sensor_origin.z = update.W_sensor_origin.z();
+  msg->resolution = update.resolution_m;
+  for (int i = 0; i < 3; ++i) {
+    msg->origin_index[i] = update.origin_index[i];
+    msg->size[i] = static_cast<uint32_t>(update.size[i]);
+  }
+  msg->run_start = update.run_start;
+  msg->run_length = update.run_length;
+  msg->log_odds = update.log_odds;
+}
+
+bool fromMsg(const OccupancyUpdate& msg, GridUpdate* update, std::string* why) {
+  update->W_sensor_origin = Eigen::Vector3d(msg.sensor_origin.x, msg.sensor_origin.y, msg.sensor_origin.z);
+  update->resolution_m = msg.resolution;
+  for (int i = 0; i < 3; ++i) {
+    if (msg.size[i] > static_cast<uint32_t>(std::numeric_limits<int>::max())) {
+      if (why) *why = "grid size out of range";
+      return false;
+    }
+    update->origin_index[i] = msg.origin_index[i];
+    update->size[i] = static_cast<int>(msg.size[i]);
+  }
+  update->run_start = msg.run_start;
+  update->run_length = msg.run_length;
+  update->log_odds = msg.log_odds;
+  return update->isConsistent(why);
+}
+
+void toMsg(const octomap::OcTree& tree, bool binary, const std_msgs::Header& header, Octomap* msg) {
+  msg->header = header;
+  msg->binary = binary;
+  msg->id = tree.getTreeType();
+  msg->resolution = tree.getResolution();
+  std::stringstream data;
+  if (binary) {
+    tree.writeBinaryData(data);
+  } else {
+    tree.writeData(data);
+  }
+  const std::string bytes = data.str();
+  msg->data.assign(bytes.begin(), bytes.end());
+}
+
+namespace {
+
+/// Colour of a height on a blue (low) to red (high) scale over [z_min, z_max].
+std_msgs::ColorRGBA heightColour(double z, double z_min, double z_max) {
+  const double t = z_max > z_min ? std::clamp((z - z_min) / (z_max - z_min), 0.0, 1.0) : 0.5;
+  std_msgs::ColorRGBA c;
+  // HSV hue from 240° (blue) to 0° (red), full saturation and value.
+  const double h = (1.0 - t) * 4.0;  // sector 0..4
+  const int sector = static_cast<int>(h);
+  const double f = h - sector;
+  double r = 0, g = 0, b = 0;
+  switch (sector) {
+    case 0: r = 1; g = f; break;
+    case 1: r = 1 - f; g = 1; break;
+    case 2: g = 1; b = f; break;
+    case 3: g = 1 - f; b = 1; break;
+    default: b = 1; break;
+  }
+  c.r = static_cast<float>(r);
+  c.g = static_cast<float>(g);
+  c.b = static_cast<float>(b);
+  c.a = 1.0f;
+  return c;
+}
+
+}  // namespace
+
+void occupiedCellMarkers(const octomap::OcTree& tree, const std_msgs::Header& header,
+                         visualization_msgs::MarkerArray* markers) {
+  double x0, y0, z_min, x1, y1, z_max;
+  tree.getMetricMin(x0, y0, z_min);
+  tree.getMetricMax(x1, y1, z_max);
+  const unsigned depth = tree.getTreeDepth();
+  markers->markers.assign(depth + 1, visualization_msgs::Marker());
+  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
+    if (!tree.isNodeOccupied(*it)) continue;
+    auto& m = markers->markers[it.getDepth()];
+    geometry_msgs::Point p;
+    p.x = it.getX();
+    p.y = it.getY();
+    p.z = it.getZ();
+    m.points.push_back(p);
+    m.colors.push_back(heightColour(p.z, z_min, z_max));
+  }
+  for (unsigned d = 0; d <= depth; ++d) {
+    auto& m = markers->markers[d];
+    m.header = header;
+    m.ns = "occupied_cells";
+    m.id = static_cast<int>(d);
+    m.type = visualization_msgs::Marker::CUBE_LIST;
+    const double size = tree.getNodeSize(d);
+    m.scale.x = m.scale.y = m.scale.z = size;
+    m.pose.orientation.w = 1.0;
+    m.color.a = 1.0f;
+    m.action = m.points.empty() ? visualization_msgs::Marker::DELETE : visualization_msgs::Marker::ADD;
+  }
+}
+
+void occupiedCellCloud(const octomap::OcTree& tree, const std_msgs::Header& header, sensor_msgs::PointCloud2* cloud) {
+  size_t n = 0;
+  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) n += tree.isNodeOccupied(*it);
+  cloud->header = header;
+  sensor_msgs::PointCloud2Modifier modifier(*cloud);
+  modifier.setPointCloud2FieldsByString(1, "xyz");
+  modifier.resize(n);
+  sensor_msgs::PointCloud2Iterator<float> x(*cloud, "x"), y(*cloud, "y"), z(*cloud, "z");
+  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
+    if (!tree.isNodeOccupied(*it)) continue;
+    *x = static_cast<float>(it.getX());
+    *y = static_cast<float>(it.getY());
+    *z = static_cast<float>(it.getZ());
+    ++x, ++y, ++z;
+  }
+}
+
+void occupiedCellCloud(const LocalGrid& grid, const std_msgs::Header& header, sensor_msgs::PointCloud2* cloud) {
+  size_t n = 0;
+  for (size_t i = 0; i < grid.numCells(); ++i) n += grid.data()[i] > 0.0f;
+  cloud->header = header;
+  sensor_msgs::PointCloud2Modifier modifier(*cloud);
+  modifier.setPointCloud2Fields(4, "x", 1, sensor_msgs::PointField::FLOAT32, "y", 1, sensor_msgs::PointField::FLOAT32,
+                                "z", 1, sensor_msgs::PointField::FLOAT32, "intensity", 1,
+                                sensor_msgs::PointField::FLOAT32);
+  modifier.resize(n);
+  sensor_msgs::PointCloud2Iterator<float> x(*cloud, "x"), y(*cloud, "y"), z(*cloud, "z"), v(*cloud, "intensity");
+  const Eigen::Vector3i& size = grid.size();
+  for (int k = 0; k < size.z(); ++k)
+    for (int j = 0; j < size.y(); ++j)
+      for (int i = 0; i < size.x(); ++i) {
+        const float value = grid.at(i, j, k);
+        if (!(value > 0.0f)) continue;
+        const Eigen::Vector3d p = grid.cellCentre(i, j, k);
+        *x = static_cast<float>(p.x());
+        *y = static_cast<float>(p.y());
+        *z = static_cast<float>(p.z());
+        *v = value;
+        ++x, ++y, ++z, ++v;
+      }
+}
+
+}  // namespace stereo_occupancy

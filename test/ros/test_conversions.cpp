@@ -1,0 +1,150 @@
+// Message conversion and parameter validation (no roscore needed).
+
+#include <gtest/gtest.h>
+#include <ros/message_traits.h>
+
+#include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/synthetic_scene.h"
+
+using namespace stereo_occupancy;
+
+TEST(Messages, OctomapIsWireCompatibleWithOctomapMsgs) {
+  // octomap_msgs/Octomap's MD5 sum: octomap_rviz_plugins and octomap tools subscribe to ours.
+  EXPECT_STREQ(ros::message_traits::MD5Sum<Octomap>::value(), "9a45536b45c5e409cd49f04bb2d9999f");
+  EXPECT_STREQ(ros::message_traits::DataType<Octomap>::value(), "stereo_occupancy/Octomap");
+}
+
+TEST(Conversions, OccupancyUpdateRoundTrip) {
+  LocalGrid grid;
+  grid.reset(Eigen::Vector3i(-5, 7, -2), Eigen::Vector3i(6, 5, 4), 0.25);
+  grid.at(0, 0, 0) = -0.6f;
+  grid.at(1, 0, 0) = 1.2f;
+  grid.at(5, 4, 3) = 2.0f;
+  grid.at(3, 2, 1) = 0.0f;  // known but zero: carries nothing
+  GridUpdate update;
+  encodeGridUpdate(grid, Eigen::Vector3d(1, 2, 3), &update);
+  ASSERT_TRUE(update.isConsistent());
+  EXPECT_EQ(update.run_start, (std::vector<uint32_t>{0, 119}));
+  EXPECT_EQ(update.run_length, (std::vector<uint32_t>{2, 1}));
+  OccupancyUpdate msg;
+  std_msgs::Header header;
+  header.frame_id = "map";
+  toMsg(update, header, &msg);
+  GridUpdate back;
+  std::string why;
+  ASSERT_TRUE(fromMsg(msg, &back, &why)) << why;
+  std::vector<std::pair<Eigen::Vector3i, float>> cells;
+  back.forEachCell([&](const Eigen::Vector3i& g, float v) { cells.emplace_back(g, v); });
+  ASSERT_EQ(cells.size(), 3u);
+  EXPECT_EQ(cells[0].first, Eigen::Vector3i(-5, 7, -2));
+  EXPECT_FLOAT_EQ(cells[0].second, -0.6f);
+  EXPECT_EQ(cells[1].first, Eigen::Vector3i(-4, 7, -2));
+  EXPECT_EQ(cells[2].first, Eigen::Vector3i(0, 11, 1));
+  EXPECT_FLOAT_EQ(cells[2].second, 2.0f);
+  EXPECT_EQ(back.W_sensor_origin, Eigen::Vector3d(1, 2, 3));
+
+  // Inconsistent messages are refused with a reason.
+  OccupancyUpdate bad = msg;
+  bad.log_odds.pop_back();
+  EXPECT_FALSE(fromMsg(bad, &back, &why));
+  bad = msg;
+  bad.run_start[1] = 1000;  // beyond the grid
+  EXPECT_FALSE(fromMsg(bad, &back, &why));
+  bad = msg;
+  bad.log_odds[0] = std::nanf("");
+  EXPECT_FALSE(fromMsg(bad, &back, &why));
+  bad = msg;
+  bad.resolution = 0.0;
+  EXPECT_FALSE(fromMsg(bad, &back, &why));
+}
+
+TEST(Conversions, CameraFromDisparityImage) {
+  stereo_msgs::DisparityImage msg;
+  msg.image.width = 640;
+  msg.image.height = 480;
+  msg.f = 700.0f;
+  msg.T = 0.3f;
+  msg.min_disparity = 0.0f;
+  msg.max_disparity = 128.0f;
+  msg.delta_d = 0.0625f;
+  DisparityMapperParameters params;
+  StereoCameraConfig cam;
+  std::string why;
+  ASSERT_TRUE(cameraFromDisparityImage(msg, nullptr, params, &cam, &why)) << why;
+  EXPECT_DOUBLE_EQ(cam.focal_length_px, 700.0);
+  EXPECT_NEAR(cam.baseline_m, 0.3, 1e-7);
+  EXPECT_DOUBLE_EQ(cam.cx_px, 319.5);
+  EXPECT_DOUBLE_EQ(cam.max_disparity_px, 128.0);
+  EXPECT_DOUBLE_EQ(cam.delta_d_px, 0.5);  // the parameter: at least the message's 1/16 px
+  sensor_msgs::CameraInfo info;
+  info.width = 640;
+  info.height = 480;
+  info.P[0] = 700.0;
+  info.P[2] = 330.0;
+  info.P[6] = 250.0;
+  ASSERT_TRUE(cameraFromDisparityImage(msg, &info, params, &cam, &why));
+  EXPECT_DOUBLE_EQ(cam.cx_px, 330.0);
+  EXPECT_DOUBLE_EQ(cam.cy_px, 250.0);
+  for (float bad_f : {0.0f, -700.0f, std::nanf(""), INFINITY}) {
+    msg.f = bad_f;
+    EXPECT_FALSE(cameraFromDisparityImage(msg, nullptr, params, &cam, &why)) << bad_f;
+  }
+  msg.f = 700.0f;
+  msg.T = -0.3f;
+  EXPECT_FALSE(cameraFromDisparityImage(msg, nullptr, params, &cam, &why));
+}
+
+TEST(Conversions, PoseFromTransform) {
+  geometry_msgs::TransformStamped t;
+  t.transform.translation.x = 1.0;
+  t.transform.rotation.w = 1.0;
+  Eigen::Isometry3d T;
+  ASSERT_TRUE(poseFromTransform(t, &T));
+  EXPECT_EQ(T.translation(), Eigen::Vector3d(1, 0, 0));
+  t.transform.rotation.w = 2.0;  // not a unit quaternion
+  EXPECT_FALSE(poseFromTransform(t, &T));
+  t.transform.rotation.w = 1.0;
+  t.transform.translation.y = std::nan("");
+  EXPECT_FALSE(poseFromTransform(t, &T));
+}
+
+TEST(Parameters, DefaultsAreValidAndBadValuesNameTheParameter) {
+  DisparityMapperParameters mapper;
+  std::string why;
+  EXPECT_TRUE(mapper.isValid(&why)) << why;
+  mapper.camera.max_range_m = -1.0;
+  EXPECT_FALSE(mapper.isValid(&why));
+  EXPECT_NE(why.find("max_range_m"), std::string::npos) << why;
+  mapper = DisparityMapperParameters();
+  mapper.drawing.sensor_model.p_min = 0.7;
+  EXPECT_FALSE(mapper.isValid(&why));
+  EXPECT_NE(why.find("p_min"), std::string::npos) << why;
+  OctomapAccumulatorParameters acc;
+  EXPECT_TRUE(acc.isValid(&why)) << why;
+  acc.map_name = "../escape";
+  EXPECT_FALSE(acc.isValid(&why));
+  EXPECT_NE(why.find("map_name"), std::string::npos);
+}
+
+TEST(Conversions, OctreeToMessageAndBack) {
+  octomap::OcTree tree(0.25);
+  tree.updateNode(octomap::point3d(1.1f, 2.2f, 0.3f), true);
+  tree.updateNode(octomap::point3d(-3.0f, 0.2f, 1.0f), false);
+  Octomap msg;
+  std_msgs::Header header;
+  toMsg(tree, true, header, &msg);
+  EXPECT_TRUE(msg.binary);
+  EXPECT_EQ(msg.id, "OcTree");
+  EXPECT_DOUBLE_EQ(msg.resolution, 0.25);
+  std::stringstream data(std::string(msg.data.begin(), msg.data.end()));
+  octomap::OcTree back(msg.resolution);
+  back.readBinaryData(data);
+  ASSERT_NE(back.search(1.1, 2.2, 0.3), nullptr);
+  EXPECT_TRUE(back.isNodeOccupied(back.search(1.1, 2.2, 0.3)));
+  EXPECT_FALSE(back.isNodeOccupied(back.search(-3.0, 0.2, 1.0)));
+  visualization_msgs::MarkerArray markers;
+  occupiedCellMarkers(tree, header, &markers);
+  size_t points = 0;
+  for (const auto& m : markers.markers) points += m.points.size();
+  EXPECT_EQ(points, 1u);
+}
