@@ -13,6 +13,8 @@
 
 namespace stereo_occupancy {
 
+class RebuildableOcTree;
+
 /// Parameters of the global map.
 struct MapAccumulatorConfig {
   double resolution_m = 0.25;        ///< cell edge; updates at another resolution are refused [m]
@@ -31,9 +33,10 @@ class MapAccumulator {
  public:
   /// @throws std::invalid_argument if the config is not valid.
   explicit MapAccumulator(const MapAccumulatorConfig& config);
+  ~MapAccumulator();
 
   const MapAccumulatorConfig& config() const { return config_; }
-  const octomap::OcTree& tree() const { return *tree_; }
+  const octomap::OcTree& tree() const;
 
   /// Adds every cell's log-odds to the map (octomap's clamped update).
   /// Returns false, leaving the map unchanged, if the update is inconsistent
@@ -59,7 +62,7 @@ class MapAccumulator {
   void applyThresholds();
 
   MapAccumulatorConfig config_;
-  std::unique_ptr<octomap::OcTree> tree_;
+  std::unique_ptr<RebuildableOcTree> tree_;
   Eigen::Vector3d W_last_origin_ = Eigen::Vector3d::Zero();
   size_t updates_ = 0;
 };

@@ -7,6 +7,28 @@
 
 namespace stereo_occupancy {
 
+/// An OcTree that can be rebuilt leaf by leaf (octomap 1.9's deleteNode
+/// leaves the emptied inner nodes' child arrays behind and trips an
+/// assertion, so pruning copies the leaves to keep instead).
+class RebuildableOcTree : public octomap::OcTree {
+ public:
+  using octomap::OcTree::OcTree;
+
+  /// Sets the leaf of @p key at @p depth (pruned leaves keep their size).
+  void setLeaf(const octomap::OcTreeKey& key, unsigned depth, float log_odds) {
+    if (!root) {
+      root = new octomap::OcTreeNode();
+      ++tree_size;
+    }
+    octomap::OcTreeNode* node = root;
+    for (unsigned d = 0; d < depth; ++d) {
+      const unsigned pos = octomap::computeChildIdx(key, static_cast<int>(tree_depth - 1 - d));
+      node = nodeChildExists(node, pos) ? getNodeChild(node, pos) : createNodeChild(node, pos);
+    }
+    node->setLogOdds(log_odds);
+  }
+};
+
 bool MapAccumulatorConfig::isValid(std::string* why) const {
   auto fail = [why](const char* text) {
     if (why) *why = text;
@@ -28,6 +50,10 @@ MapAccumulator::MapAccumulator(const MapAccumulatorConfig& config) : config_(con
   reset();
 }
 
+MapAccumulator::~MapAccumulator() = default;
+
+const octomap::OcTree& MapAccumulator::tree() const { return *tree_; }
+
 void MapAccumulator::applyThresholds() {
   tree_->setClampingThresMin(config_.clamping_min_prob);
   tree_->setClampingThresMax(config_.clamping_max_prob);
@@ -35,7 +61,7 @@ void MapAccumulator::applyThresholds() {
 }
 
 void MapAccumulator::reset() {
-  tree_ = std::make_unique<octomap::OcTree>(config_.resolution_m);
+  tree_ = std::make_unique<RebuildableOcTree>(config_.resolution_m);
   applyThresholds();
   updates_ = 0;
 }
@@ -62,19 +88,22 @@ bool MapAccumulator::integrate(const GridUpdate& update, std::string* why) {
 
 size_t MapAccumulator::prune() {
   if (config_.max_extent_m <= 0.0) return 0;
-  std::vector<octomap::OcTreeKey> outside;
-  std::vector<unsigned> depths;
-  const Eigen::Array3d lo = (W_last_origin_.array() - config_.max_extent_m);
-  const Eigen::Array3d hi = (W_last_origin_.array() + config_.max_extent_m);
-  for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it) {
+  const Eigen::Array3d lo = W_last_origin_.array() - config_.max_extent_m;
+  const Eigen::Array3d hi = W_last_origin_.array() + config_.max_extent_m;
+  auto inside = [&](const octomap::OcTree::leaf_iterator& it) {
     const Eigen::Array3d p(it.getX(), it.getY(), it.getZ());
-    if ((p < lo).any() || (p > hi).any()) {
-      outside.push_back(it.getKey());
-      depths.push_back(it.getDepth());
-    }
-  }
-  for (size_t i = 0; i < outside.size(); ++i) tree_->deleteNode(outside[i], depths[i]);
-  return outside.size();
+    return (p >= lo).all() && (p <= hi).all();
+  };
+  size_t outside = 0;
+  for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it) outside += !inside(it);
+  if (outside == 0) return 0;
+  auto kept = std::make_unique<RebuildableOcTree>(config_.resolution_m);
+  for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it)
+    if (inside(it)) kept->setLeaf(it.getKey(), it.getDepth(), it->getLogOdds());
+  kept->updateInnerOccupancy();
+  tree_ = std::move(kept);
+  applyThresholds();
+  return outside;
 }
 
 std::vector<std::string> MapAccumulator::save(const std::string& directory, const std::string& base_name) const {

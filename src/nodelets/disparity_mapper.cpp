@@ -91,7 +91,7 @@ void DisparityMapper::onInit() {
   if (!loadParameters(pnh, &params_, &why)) {
     // Refuse to start: no subscription, no output. The manager and its other
     // nodelets keep running.
-    NODELET_FATAL("invalid parameter: %s; DisparityMapper does not start", why.c_str());
+    NODELET_FATAL("%s: invalid parameter: %s; DisparityMapper does not start", getName().c_str(), why.c_str());
     return;
   }
 

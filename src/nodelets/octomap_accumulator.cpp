@@ -58,7 +58,7 @@ void OctomapAccumulator::onInit() {
   ros::NodeHandle& pnh = getPrivateNodeHandle();
   std::string why;
   if (!loadParameters(pnh, &params_, &why)) {
-    NODELET_FATAL("invalid parameter: %s; OctomapAccumulator does not start", why.c_str());
+    NODELET_FATAL("%s: invalid parameter: %s; OctomapAccumulator does not start", getName().c_str(), why.c_str());
     return;
   }
   map_ = std::make_unique<MapAccumulator>(params_.map);

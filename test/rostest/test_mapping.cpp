@@ -3,6 +3,9 @@
 
 #include <gtest/gtest.h>
 #include <ros/ros.h>
+#include <dynamic_reconfigure/Reconfigure.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
 #include <std_srvs/Trigger.h>
 #include <stereo_msgs/DisparityImage.h>
 #include <tf2_ros/transform_broadcaster.h>
@@ -58,7 +61,9 @@ class MappingTest : public ::testing::Test {
   }
 
   /// Sends the camera pose on /tf (unless frame is unknown) and one disparity image at @p stamp.
-  void sendFrame(const ros::Time& stamp, const std::string& frame = "camera_optical", bool with_tf = true) {
+  void sendFrame(const ros::Time& stamp, const std::string& frame = "camera_optical", bool with_tf = true,
+                 const cv::Mat* disparity = nullptr) {
+    const cv::Mat& image = disparity ? *disparity : image_;
     if (with_tf) {
       geometry_msgs::TransformStamped t;
       t.header.stamp = stamp;
@@ -78,12 +83,12 @@ class MappingTest : public ::testing::Test {
     msg->header.stamp = stamp;
     msg->header.frame_id = frame;
     msg->image.header = msg->header;
-    msg->image.width = image_.cols;
-    msg->image.height = image_.rows;
+    msg->image.width = image.cols;
+    msg->image.height = image.rows;
     msg->image.encoding = "32FC1";
-    msg->image.step = image_.cols * 4;
-    msg->image.data.resize(image_.total() * 4);
-    std::memcpy(msg->image.data.data(), image_.data, msg->image.data.size());
+    msg->image.step = image.cols * 4;
+    msg->image.data.resize(image.total() * 4);
+    std::memcpy(msg->image.data.data(), image.data, msg->image.data.size());
     msg->f = 700.0f;
     msg->T = 0.3f;
     msg->min_disparity = 0.0f;
@@ -112,6 +117,7 @@ class MappingTest : public ::testing::Test {
   cv::Mat image_;
   std::mutex mutex_;
   std::vector<OccupancyUpdateConstPtr> updates_;
+  std::vector<OccupancyUpdateConstPtr> depth_updates_;
   OctomapConstPtr map_;
 };
 
@@ -203,6 +209,102 @@ TEST_F(MappingTest, UpdatesMapSaveAndDroppedImages) {
   ASSERT_NE(saved.search(12.1, 0.1, 2.1), nullptr);
   EXPECT_TRUE(saved.isNodeOccupied(saved.search(12.1, 0.1, 2.1)));
   EXPECT_EQ(saved.getNumLeafNodes(), tree.getNumLeafNodes());
+}
+
+/// The largest log-odds of an update (the wall's peak).
+float maxLogOdds(const OccupancyUpdate& msg) {
+  float m = -1e9f;
+  for (float v : msg.log_odds) m = std::max(m, v);
+  return m;
+}
+
+// A depth camera's image gives the same update as the disparity image of the
+// same frame; dynamic_reconfigure changes the model; an invalid parameter
+// keeps a nodelet from starting without harming the manager.
+TEST_F(MappingTest, DepthInputReconfigureAndInvalidParameters) {
+  ros::Subscriber depth_updates = nh_.subscribe<OccupancyUpdate>(
+      "/depth_update", 5, [this](const OccupancyUpdateConstPtr& msg) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        depth_updates_.push_back(msg);
+      });
+  ros::Publisher depth_pub = nh_.advertise<sensor_msgs::Image>("/depth/image", 2);
+  ros::Publisher info_pub = nh_.advertise<sensor_msgs::CameraInfo>("/depth/camera_info", 2, /*latch=*/true);
+  const ros::WallTime until = ros::WallTime::now() + ros::WallDuration(20.0);
+  while ((depth_pub.getNumSubscribers() == 0 || depth_updates.getNumPublishers() == 0) && ros::WallTime::now() < until)
+    ros::WallDuration(0.05).sleep();
+  ASSERT_GT(depth_pub.getNumSubscribers(), 0u);
+
+  // The nodelet with resolution_m = -1 subscribed to nothing.
+  ros::Publisher bad_pub = nh_.advertise<stereo_msgs::DisparityImage>("/bad/disparity", 1);
+  ros::WallDuration(1.0).sleep();
+  EXPECT_EQ(bad_pub.getNumSubscribers(), 0u);
+
+  sensor_msgs::CameraInfo info;
+  info.header.frame_id = "camera_optical";
+  info.width = 640;
+  info.height = 480;
+  info.K = {700, 0, 319.5, 0, 700, 239.5, 0, 0, 1};
+  info.P = {700, 0, 319.5, 0, 0, 700, 239.5, 0, 0, 0, 1, 0};
+  info_pub.publish(info);
+  ros::WallDuration(0.5).sleep();
+
+  // A wall filling the whole view: a depth camera reports no "infinitely far"
+  // (depth 0 means no measurement), so both inputs carry the same information.
+  SyntheticScene big_wall;
+  big_wall.boxes.emplace_back(Eigen::Vector3d(12.0, -30.0, -30.0), Eigen::Vector3d(13.0, 30.0, 30.0));
+  const cv::Mat wall_image = renderDisparity(big_wall, StereoCameraModel(StereoCameraConfig()), T_W_C_);
+  const ros::Time stamp = ros::Time::now();
+  sendFrame(stamp, "camera_optical", true, &wall_image);
+  auto depth = boost::make_shared<sensor_msgs::Image>();
+  depth->header.stamp = stamp;
+  depth->header.frame_id = "camera_optical";
+  depth->width = 640;
+  depth->height = 480;
+  depth->encoding = "32FC1";
+  depth->step = 640 * 4;
+  depth->data.resize(640 * 480 * 4);
+  float* z = reinterpret_cast<float*>(depth->data.data());
+  for (int i = 0; i < 640 * 480; ++i) {
+    const float d = reinterpret_cast<const float*>(wall_image.data)[i];
+    ASSERT_GT(d, 0.0f);
+    z[i] = 210.0f / d;  // z = bf / d
+  }
+  depth_pub.publish(depth);
+  ASSERT_TRUE(waitFor([&] { return !depth_updates_.empty() && !updates_.empty(); }, 20.0));
+  OccupancyUpdateConstPtr from_depth, from_disparity;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    from_depth = depth_updates_.back();
+    from_disparity = updates_.back();
+  }
+  ASSERT_EQ(from_depth->header.stamp, stamp);
+  ASSERT_EQ(from_disparity->header.stamp, stamp);
+  EXPECT_EQ(from_depth->origin_index, from_disparity->origin_index);
+  EXPECT_EQ(from_depth->size, from_disparity->size);
+  EXPECT_EQ(from_depth->run_start, from_disparity->run_start);
+  ASSERT_EQ(from_depth->log_odds.size(), from_disparity->log_odds.size());
+  for (size_t i = 0; i < from_depth->log_odds.size(); ++i)
+    ASSERT_NEAR(from_depth->log_odds[i], from_disparity->log_odds[i], 1e-3) << i;
+
+  // The wall's peak at 12 m is 0.5 + k / (Δl √(2π)) (eq. 9); halve k at run time.
+  const double dl = 144.0 * 0.5 / 210.0;
+  auto logit = [](double p) { return std::log(p / (1.0 - p)); };
+  EXPECT_NEAR(maxLogOdds(*from_disparity), logit(0.5 + 0.1 / (dl * std::sqrt(2 * M_PI))), 0.01);
+  dynamic_reconfigure::Reconfigure reconfigure;
+  dynamic_reconfigure::DoubleParameter k;
+  k.name = "k_m";
+  k.value = 0.05;
+  reconfigure.request.config.doubles.push_back(k);
+  ASSERT_TRUE(ros::service::call("/disparity_mapper/set_parameters", reconfigure));
+  const ros::Time later = stamp + ros::Duration(0.1);
+  sendFrame(later);
+  ASSERT_TRUE(waitFor([&] { return updates_.back()->header.stamp == later; }, 20.0));
+  OccupancyUpdateConstPtr after;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    after = updates_.back();
+  }
+  EXPECT_NEAR(maxLogOdds(*after), logit(0.5 + 0.05 / (dl * std::sqrt(2 * M_PI))), 0.01);
 }
 
 }  // namespace

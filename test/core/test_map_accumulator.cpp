@@ -1,0 +1,134 @@
+#include <gtest/gtest.h>
+
+#include <octomap/OcTree.h>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+
+#include "stereo_occupancy/disparity_drawer.h"
+#include "stereo_occupancy/grid_update.h"
+#include "stereo_occupancy/map_accumulator.h"
+#include "stereo_occupancy/synthetic_scene.h"
+
+using namespace stereo_occupancy;
+
+namespace {
+GridUpdate singleCell(const Eigen::Vector3i& g, float value, double res = 0.25) {
+  LocalGrid grid;
+  grid.reset(g, Eigen::Vector3i(1, 1, 1), res);
+  grid.at(0, 0, 0) = value;
+  GridUpdate u;
+  encodeGridUpdate(grid, Eigen::Vector3d::Zero(), &u);
+  return u;
+}
+double logit(double p) { return std::log(p / (1.0 - p)); }
+}  // namespace
+
+TEST(GridUpdate, EncodesKnownCellsAsRuns) {
+  LocalGrid grid;
+  grid.reset(Eigen::Vector3i(10, 20, 30), Eigen::Vector3i(4, 3, 2), 0.5);
+  for (int x = 1; x < 4; ++x) grid.at(x, 1, 0) = 0.5f;  // one run of 3
+  grid.at(0, 0, 1) = -0.2f;                              // a run of 1
+  GridUpdate u;
+  encodeGridUpdate(grid, Eigen::Vector3d(1, 2, 3), &u);
+  EXPECT_EQ(u.run_start, (std::vector<uint32_t>{5, 12}));
+  EXPECT_EQ(u.run_length, (std::vector<uint32_t>{3, 1}));
+  EXPECT_EQ(u.numCells(), 4u);
+  std::string why;
+  EXPECT_TRUE(u.isConsistent(&why)) << why;
+  int seen = 0;
+  u.forEachCell([&](const Eigen::Vector3i& g, float v) {
+    if (seen < 3) {
+      EXPECT_EQ(g, Eigen::Vector3i(11 + seen, 21, 30));
+      EXPECT_FLOAT_EQ(v, 0.5f);
+    } else {
+      EXPECT_EQ(g, Eigen::Vector3i(10, 20, 31));
+    }
+    ++seen;
+  });
+  EXPECT_EQ(seen, 4);
+  GridUpdate bad = u;
+  bad.run_start = {5, 6};  // overlapping runs
+  EXPECT_FALSE(bad.isConsistent(&why));
+  bad = u;
+  bad.size = Eigen::Vector3i(2, 2, 2);  // runs past the grid's end
+  EXPECT_FALSE(bad.isConsistent(&why));
+}
+
+TEST(MapAccumulator, AddsLogOddsWithClamping) {
+  MapAccumulatorConfig cfg;
+  MapAccumulator map(cfg);
+  const Eigen::Vector3i g(-7, 3, 12);
+  for (int i = 0; i < 2; ++i) ASSERT_TRUE(map.integrate(singleCell(g, 0.6f)));
+  const octomap::point3d centre((g.x() + 0.5) * 0.25, (g.y() + 0.5) * 0.25, (g.z() + 0.5) * 0.25);
+  const octomap::OcTreeNode* node = map.tree().search(centre);
+  ASSERT_NE(node, nullptr);
+  EXPECT_NEAR(node->getLogOdds(), 1.2f, 1e-5);
+  for (int i = 0; i < 20; ++i) ASSERT_TRUE(map.integrate(singleCell(g, 0.6f)));
+  EXPECT_NEAR(map.tree().search(centre)->getLogOdds(), logit(0.97), 1e-4);  // clamped at clamping_max_prob
+  for (int i = 0; i < 40; ++i) ASSERT_TRUE(map.integrate(singleCell(g, -0.6f)));
+  EXPECT_NEAR(map.tree().search(centre)->getLogOdds(), logit(0.12), 1e-4);
+  EXPECT_EQ(map.updates(), 62u);
+  map.reset();
+  EXPECT_EQ(map.tree().size(), 0u);
+  EXPECT_EQ(map.updates(), 0u);
+}
+
+TEST(MapAccumulator, RefusesOtherResolutionsAndBrokenUpdates) {
+  MapAccumulator map(MapAccumulatorConfig{});
+  std::string why;
+  EXPECT_FALSE(map.integrate(singleCell(Eigen::Vector3i(0, 0, 0), 1.0f, 0.5), &why));
+  EXPECT_NE(why.find("resolution"), std::string::npos);
+  GridUpdate broken = singleCell(Eigen::Vector3i(0, 0, 0), 1.0f);
+  broken.log_odds.push_back(2.0f);
+  EXPECT_FALSE(map.integrate(broken, &why));
+  EXPECT_EQ(map.tree().size(), 0u);
+  EXPECT_EQ(map.updates(), 0u);
+}
+
+TEST(MapAccumulator, PruneKeepsTheMapWithinItsExtent) {
+  MapAccumulatorConfig cfg;
+  cfg.max_extent_m = 10.0;
+  MapAccumulator map(cfg);
+  ASSERT_TRUE(map.integrate(singleCell(Eigen::Vector3i(0, 0, 0), 1.0f)));
+  ASSERT_TRUE(map.integrate(singleCell(Eigen::Vector3i(200, 0, 0), 1.0f)));  // 50 m away
+  GridUpdate near = singleCell(Eigen::Vector3i(4, 0, 0), 1.0f);
+  near.W_sensor_origin = Eigen::Vector3d(1.0, 0.0, 0.0);
+  ASSERT_TRUE(map.integrate(near));
+  EXPECT_EQ(map.prune(), 1u);
+  EXPECT_EQ(map.tree().search(50.1, 0.1, 0.1), nullptr);
+  EXPECT_NE(map.tree().search(0.1, 0.1, 0.1), nullptr);
+  EXPECT_EQ(map.tree().getNumLeafNodes(), 2u);
+}
+
+TEST(MapAccumulator, SavedFilesReadBackAndReplaceAtomically) {
+  MapAccumulator map(MapAccumulatorConfig{});
+  StereoCameraConfig camera;
+  Eigen::Isometry3d T;
+  const cv::Mat image = table1Image(StereoCameraModel(camera), &T);
+  DisparityDrawer drawer(camera, DrawingConfig());
+  LocalGrid grid;
+  drawer.draw(image, T, &grid);
+  GridUpdate update;
+  encodeGridUpdate(grid, T.translation(), &update);
+  ASSERT_TRUE(map.integrate(update));
+  const std::string dir = ::testing::TempDir();
+  {
+    std::ofstream old(dir + "/acc_map.bt");
+    old << "previous";
+  }
+  const auto paths = map.save(dir, "acc_map");
+  ASSERT_EQ(paths.size(), 2u);
+  octomap::OcTree bt(paths[0]);
+  EXPECT_EQ(bt.getNumLeafNodes(), map.tree().getNumLeafNodes());
+  std::unique_ptr<octomap::AbstractOcTree> ot(octomap::AbstractOcTree::read(paths[1]));
+  ASSERT_NE(dynamic_cast<octomap::OcTree*>(ot.get()), nullptr);
+  // The post at 6 m (table1Scene) is occupied in the saved map.
+  const octomap::OcTreeNode* post = bt.search(5.6, 1.5, 1.0);
+  ASSERT_NE(post, nullptr);
+  EXPECT_TRUE(bt.isNodeOccupied(post));
+  EXPECT_THROW(map.save("/nonexistent_dir_for_test", "m"), std::runtime_error);
+  std::remove(paths[0].c_str());
+  std::remove(paths[1].c_str());
+}
