@@ -1,22 +1,63 @@
 #!/usr/bin/env bash
-# The README's main command. Until the simulated flight lands it installs what
-# is missing, builds the package, reproduces the paper's Table I on the
-# synthetic test image and draws that image into a map file.
+# The README's main command: a simulated helicopter flight replayed through
+# the two nodelets in a real roscore. Installs what is missing, builds,
+# generates the flight's bag (or reuses it), replays it with
+# launch/replay.launch, saves the map (.bt and .ot), scores it against the
+# ground truth, draws a top and a side view, and prints a summary whose last
+# line is "map: <path of the .bt file>".
+#
+#   SCENARIO=posts|houses (default posts)   SEED=1   OUT=build/demo
 set -euo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 ws="${WS:-$repo/build/ws}"
 out="${OUT:-$repo/build/demo}"
+scenario="${SCENARIO:-posts}"
+seed="${SEED:-1}"
 export PATH="/usr/bin:$PATH"
 
 "$repo/scripts/install_deps.sh"
-"$repo/scripts/build.sh" >/dev/null
+"$repo/scripts/build.sh" >"$out.build.log" 2>&1 || { mkdir -p "$out"; cat "$out.build.log"; exit 1; }
 bin="$ws/devel/lib/stereo_occupancy"
 mkdir -p "$out"
+mv -f "$out.build.log" "$out/build.log"
 
-"$bin/table1" --repeat 21 --save-image "$out/table1_image.pfm"
+bag="$out/${scenario}_seed${seed}.bag"
+if [ ! -f "$bag" ]; then
+  "$bin/simulate_flight" --scenario "$scenario" --seed "$seed" --output "$bag.tmp"
+  mv "$bag.tmp" "$bag"
+  mv "$bag.tmp.scene.txt" "$bag.scene.txt"
+fi
+
+map_dir="$out/map_$scenario"
+rm -rf "$map_dir"
+mkdir -p "$map_dir"
+set +u
+# shellcheck disable=SC1091
+source "$ws/devel/setup.bash"
+set -u
+echo "replaying $bag through DisparityMapper and OctomapAccumulator (launch/replay.launch) ..."
+roslaunch stereo_occupancy replay.launch bag:="$bag" save_dir:="$map_dir" >"$out/replay_$scenario.log" 2>&1 || {
+  tail -30 "$out/replay_$scenario.log"
+  exit 1
+}
+map="$map_dir/stereo_occupancy_map.bt"
+[ -f "$map" ] || { echo "no map was saved; see $out/replay_$scenario.log"; exit 1; }
+
+summary="$(grep -m1 'DisparityMapper summary:' "$out/replay_$scenario.log" || true)"
+field() { echo "$summary" | sed -n "s/.*$1=\([0-9.]*\).*/\1/p"; }
+quality="$("$bin/evaluate_map" --map "$map" --scenario "$scenario" --views "$out/${scenario}_map" 2>/dev/null)"
+q() { echo "$quality" | sed -n "s/.*\"$1\": \([0-9.e+-]*\).*/\1/p"; }
+pct() { awk -v v="$1" 'BEGIN { printf "%.1f %%", 100 * v }'; }
+
 echo
-# The test image's pose: 2 m above the ground looking along +x (optical frame in W).
-"$bin/draw_disparity" --disparity "$out/table1_image.pfm" --focal 700 --cx 319.5 --cy 239.5 \
-  --baseline 0.3 --delta-d 0.5 --pose "0 0 2 -0.5 0.5 -0.5 0.5" --resolution 0.25 --max-range 25 \
-  --algorithm line_pyramid --blur 0.1 0.01 --repeat 21 --output "$out/table1_map.bt"
-echo "map: $out/table1_map.bt"
+echo "stereo_occupancy demo: scenario '$scenario' (seed $seed), pyramidal line drawing at 0.25 m, 25 m range"
+echo "  frames:       $(field images_received) received, $(field images_processed) mapped, $(field dropped_no_transform) dropped (no pose), $(field dropped_invalid) refused"
+echo "  ms per frame: $(field ms_per_image_mean) mean, $(field ms_per_image_median) median, $(field ms_per_image_p99) p99, $(field ms_per_image_max) max (draw + blur + encode + publish)"
+echo "  map quality against the ground truth (within one cell):"
+echo "    occupied precision       $(pct "$(q occupied_precision)")  ($(q occupied_at_surface) of $(q occupied_cells) occupied cells at a true surface)"
+echo "    occupied recall          $(pct "$(q occupied_recall)")  ($(q surface_found) of $(q truth_surface_cells) observed surface cells)"
+echo "    surface called free      $(pct "$(q surface_called_free_fraction)")"
+echo "    free-space coverage      $(pct "$(q free_coverage)")  (of the truly empty cells the rays crossed)"
+echo "  views:        $out/${scenario}_map_top.png, $out/${scenario}_map_side.png"
+echo "  log:          $out/replay_$scenario.log"
+echo "map: $map"

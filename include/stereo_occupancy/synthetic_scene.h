@@ -17,13 +17,24 @@ namespace stereo_occupancy {
 /// A scene in the world frame W: axis-aligned boxes and an optional ground
 /// plane z = ground_height_m (REP-103: z up).
 struct SyntheticScene {
+  static constexpr int kHitNothing = -2;
+  static constexpr int kHitGround = -1;
+
   std::vector<Eigen::AlignedBox3d> boxes;
+  /// Boxes a stereo matcher finds no texture on (their pixels come out unmatched).
+  std::vector<bool> textureless;
   std::optional<double> ground_height_m;
 
-  /// Range along the unit ray W_dir from W_origin to the first surface, +inf if none.
-  double castRay(const Eigen::Vector3d& W_origin, const Eigen::Vector3d& W_dir) const;
+  /// Adds a box spanning [min, max] [m].
+  void addBox(const Eigen::Vector3d& min, const Eigen::Vector3d& max, bool is_textureless = false);
+
+  /// Range along the unit ray W_dir from W_origin to the first surface, +inf
+  /// if none; @p hit (optional) is the box index, kHitGround or kHitNothing.
+  double castRay(const Eigen::Vector3d& W_origin, const Eigen::Vector3d& W_dir, int* hit = nullptr) const;
   /// True if W_point lies inside a box or below the ground.
   bool isInside(const Eigen::Vector3d& W_point) const;
+  /// Euclidean distance from W_point to the nearest solid (0 inside) [m].
+  double distance(const Eigen::Vector3d& W_point) const;
 };
 
 /// Renders the exact disparity of @p scene seen from T_W_C: bf/z of the first

@@ -29,11 +29,37 @@ double rayBox(const Eigen::AlignedBox3d& box, const Eigen::Vector3d& o, const Ei
 }
 }  // namespace
 
-double SyntheticScene::castRay(const Eigen::Vector3d& W_origin, const Eigen::Vector3d& W_dir) const {
+void SyntheticScene::addBox(const Eigen::Vector3d& min, const Eigen::Vector3d& max, bool is_textureless) {
+  boxes.emplace_back(min, max);
+  textureless.resize(boxes.size(), false);
+  textureless.back() = is_textureless;
+}
+
+double SyntheticScene::castRay(const Eigen::Vector3d& W_origin, const Eigen::Vector3d& W_dir, int* hit) const {
   double best = kInf;
-  for (const auto& box : boxes) best = std::min(best, rayBox(box, W_origin, W_dir));
-  if (ground_height_m && W_dir.z() < 0.0 && W_origin.z() > *ground_height_m)
-    best = std::min(best, (*ground_height_m - W_origin.z()) / W_dir.z());
+  int what = kHitNothing;
+  for (size_t i = 0; i < boxes.size(); ++i) {
+    const double t = rayBox(boxes[i], W_origin, W_dir);
+    if (t < best) {
+      best = t;
+      what = static_cast<int>(i);
+    }
+  }
+  if (ground_height_m && W_dir.z() < 0.0 && W_origin.z() > *ground_height_m) {
+    const double t = (*ground_height_m - W_origin.z()) / W_dir.z();
+    if (t < best) {
+      best = t;
+      what = kHitGround;
+    }
+  }
+  if (hit) *hit = what;
+  return best;
+}
+
+double SyntheticScene::distance(const Eigen::Vector3d& W_point) const {
+  double best = kInf;
+  if (ground_height_m) best = std::max(0.0, W_point.z() - *ground_height_m);
+  for (const auto& box : boxes) best = std::min(best, box.exteriorDistance(W_point));
   return best;
 }
 
@@ -88,7 +114,7 @@ SyntheticScene table1Scene(Eigen::Isometry3d* T_W_C) {
   SyntheticScene scene;
   scene.ground_height_m = 0.0;
   auto box = [&](double x0, double y0, double z0, double x1, double y1, double z1) {
-    scene.boxes.emplace_back(Eigen::Vector3d(x0, y0, z0), Eigen::Vector3d(x1, y1, z1));
+    scene.addBox(Eigen::Vector3d(x0, y0, z0), Eigen::Vector3d(x1, y1, z1));
   };
   box(5.5, 1.0, 0.0, 6.5, 2.0, 3.5);      // post at 6 m, left
   box(9.5, -3.5, 0.0, 10.5, -2.5, 6.0);   // post at 10 m, right

@@ -11,6 +11,7 @@
 #include <std_srvs/Trigger.h>
 
 #include <chrono>
+#include <cstdio>
 #include <memory>
 #include <mutex>
 
@@ -87,9 +88,12 @@ OctomapAccumulator::~OctomapAccumulator() {
   std::lock_guard<std::mutex> lock(mutex_);
   if (map_->updates() == 0) return;
   try {
-    for (const auto& path : save()) ROS_INFO("OctomapAccumulator: saved the map to %s on shutdown", path.c_str());
+    // On stderr: rosconsole may be gone at shutdown.
+    for (const auto& path : save())
+      std::fprintf(stderr, "OctomapAccumulator: saved the map of %lu updates to %s on shutdown\n",
+                   static_cast<unsigned long>(map_->updates()), path.c_str());
   } catch (const std::exception& e) {
-    ROS_ERROR("OctomapAccumulator: could not save the map on shutdown: %s", e.what());
+    std::fprintf(stderr, "OctomapAccumulator: could not save the map on shutdown: %s\n", e.what());
   }
 }
 

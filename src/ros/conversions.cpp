@@ -2,6 +2,8 @@
 
 #include <sensor_msgs/point_cloud2_iterator.h>
 
+#include "stereo_occupancy/map_rendering.h"
+
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -121,25 +123,11 @@ void toMsg(const octomap::OcTree& tree, bool binary, const std_msgs::Header& hea
 
 namespace {
 
-/// Colour of a height on a blue (low) to red (high) scale over [z_min, z_max].
-std_msgs::ColorRGBA heightColour(double z, double z_min, double z_max) {
-  const double t = z_max > z_min ? std::clamp((z - z_min) / (z_max - z_min), 0.0, 1.0) : 0.5;
+std_msgs::ColorRGBA rgba(const cv::Vec3b& bgr) {
   std_msgs::ColorRGBA c;
-  // HSV hue from 240° (blue) to 0° (red), full saturation and value.
-  const double h = (1.0 - t) * 4.0;  // sector 0..4
-  const int sector = static_cast<int>(h);
-  const double f = h - sector;
-  double r = 0, g = 0, b = 0;
-  switch (sector) {
-    case 0: r = 1; g = f; break;
-    case 1: r = 1 - f; g = 1; break;
-    case 2: g = 1; b = f; break;
-    case 3: g = 1 - f; b = 1; break;
-    default: b = 1; break;
-  }
-  c.r = static_cast<float>(r);
-  c.g = static_cast<float>(g);
-  c.b = static_cast<float>(b);
+  c.r = bgr[2] / 255.0f;
+  c.g = bgr[1] / 255.0f;
+  c.b = bgr[0] / 255.0f;
   c.a = 1.0f;
   return c;
 }
@@ -161,7 +149,7 @@ void occupiedCellMarkers(const octomap::OcTree& tree, const std_msgs::Header& he
     p.y = it.getY();
     p.z = it.getZ();
     m.points.push_back(p);
-    m.colors.push_back(heightColour(p.z, z_min, z_max));
+    m.colors.push_back(rgba(heightColour(p.z, z_min, z_max)));
   }
   for (unsigned d = 0; d <= depth; ++d) {
     auto& m = markers->markers[d];

@@ -58,7 +58,7 @@ long jsonNumber(const std::string& json, const std::string& key) {
 TEST(DrawDisparityCli, RoundTripThroughAnOtFile) {
   // A 2 m wide box 12 m in front of a camera at (0, 0, 2) looking along +x.
   SyntheticScene scene;
-  scene.boxes.emplace_back(Eigen::Vector3d(12.0, -1.0, 1.0), Eigen::Vector3d(13.0, 1.0, 3.0));
+  scene.addBox(Eigen::Vector3d(12.0, -1.0, 1.0), Eigen::Vector3d(13.0, 1.0, 3.0));
   const Eigen::Isometry3d T = lookingAlongX(Eigen::Vector3d(0.0, 0.0, 2.0));
   const StereoCameraModel cam{StereoCameraConfig()};
   const std::string pfm = ::testing::TempDir() + "cli_frame.pfm";

@@ -30,7 +30,7 @@ namespace {
 /// A 6 m wide, 4 m high wall 12 m in front of a camera 2 m above the ground, looking along +x.
 SyntheticScene wallScene() {
   SyntheticScene scene;
-  scene.boxes.emplace_back(Eigen::Vector3d(12.0, -3.0, 0.0), Eigen::Vector3d(13.0, 3.0, 4.0));
+  scene.addBox(Eigen::Vector3d(12.0, -3.0, 0.0), Eigen::Vector3d(13.0, 3.0, 4.0));
   return scene;
 }
 
@@ -251,7 +251,7 @@ TEST_F(MappingTest, DepthInputReconfigureAndInvalidParameters) {
   // A wall filling the whole view: a depth camera reports no "infinitely far"
   // (depth 0 means no measurement), so both inputs carry the same information.
   SyntheticScene big_wall;
-  big_wall.boxes.emplace_back(Eigen::Vector3d(12.0, -30.0, -30.0), Eigen::Vector3d(13.0, 30.0, 30.0));
+  big_wall.addBox(Eigen::Vector3d(12.0, -30.0, -30.0), Eigen::Vector3d(13.0, 30.0, 30.0));
   const cv::Mat wall_image = renderDisparity(big_wall, StereoCameraModel(StereoCameraConfig()), T_W_C_);
   const ros::Time stamp = ros::Time::now();
   sendFrame(stamp, "camera_optical", true, &wall_image);

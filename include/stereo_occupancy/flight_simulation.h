@@ -1,0 +1,66 @@
+#pragma once
+/// @file
+/// Simulated helicopter flights like the paper's Fig. 7: analytic scenes, a
+/// trajectory, and rectified disparity images with stereo effects.
+/// Deterministic for a seed.
+
+#include <Eigen/Geometry>
+#include <opencv2/core.hpp>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "stereo_occupancy/stereo_camera_model.h"
+#include "stereo_occupancy/synthetic_scene.h"
+
+namespace stereo_occupancy {
+
+/// What a real block matcher does to an ideal disparity image.
+struct StereoEffects {
+  double noise_sigma_px = 0.15;       ///< Gaussian disparity noise [px]
+  double subpixel_step_px = 1.0 / 16.0;  ///< output quantisation (SGBM's 1/16 px) [px]
+  double unmatched_fraction = 0.03;   ///< pixels left unmatched at random (NaN)
+  /// The matcher's search range [px]: a disparity below min_search comes out
+  /// as zero (infinitely far), above max_search as unmatched.
+  double min_search_disparity_px = 1.0;
+  double max_search_disparity_px = 128.0;
+  /// Sky is matched as zero disparity below this image row and unmatched
+  /// (texture-less) above it; < 0: all sky is matched.
+  int sky_unmatched_above_row = -1;
+};
+
+/// One flight: scene, camera, mount and trajectory.
+struct FlightScenario {
+  std::string name;
+  SyntheticScene scene;
+  StereoCameraConfig camera;       ///< 640x480, f = 700 px, b = 0.3 m
+  StereoEffects effects;
+  Eigen::Isometry3d T_B_C;         ///< camera optical frame in the body frame (REP-103 body: x forward, z up)
+  std::vector<Eigen::Isometry3d> T_W_B;  ///< body poses, one per frame
+  double frame_rate_hz = 10.0;
+
+  /// Optical frame pose of frame i.
+  Eigen::Isometry3d cameraPose(size_t i) const { return T_W_B[i] * T_B_C; }
+};
+
+/// Names of the built-in scenarios: "posts" (a flight through obstacle posts
+/// with wires between some of them) and "houses" (a flight along a street of
+/// houses).
+std::vector<std::string> scenarioNames();
+
+/// The named scenario; @throws std::invalid_argument for an unknown name.
+FlightScenario makeScenario(const std::string& name);
+
+/// Exact disparity of frame i (0 = sky); optionally the depth z of each pixel
+/// (+inf for sky) in @p true_depth.
+cv::Mat renderTrueDisparity(const FlightScenario& scenario, size_t frame, cv::Mat* true_depth = nullptr);
+
+/// Frame i as the matcher sees it: noise, quantisation, unmatched and
+/// texture-less pixels, search range. Deterministic for (seed, frame).
+cv::Mat renderStereoFrame(const FlightScenario& scenario, size_t frame, uint32_t seed);
+
+/// A one-line-per-object text description of the scene (for the record).
+std::string describeScene(const SyntheticScene& scene);
+
+}  // namespace stereo_occupancy

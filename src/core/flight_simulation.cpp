@@ -1,0 +1,171 @@
+#include "stereo_occupancy/flight_simulation.h"
+
+#include <cmath>
+#include <limits>
+#include <random>
+#include <sstream>
+#include <stdexcept>
+
+namespace stereo_occupancy {
+
+namespace {
+
+/// Optical frame in a body frame (x forward, y left, z up), pitched down.
+Eigen::Isometry3d forwardCamera(double pitch_down_rad) {
+  return lookingAlongX(Eigen::Vector3d(0.3, 0.0, -0.2), 0.0, pitch_down_rad);
+}
+
+Eigen::Isometry3d bodyPose(const Eigen::Vector3d& position, double yaw_rad) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = Eigen::AngleAxisd(yaw_rad, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  T.translation() = position;
+  return T;
+}
+
+FlightScenario postsScenario() {
+  FlightScenario s;
+  s.name = "posts";
+  s.scene.ground_height_m = 0.0;
+  // Pairs of 0.4 m posts, 8 m tall, forming gates every 12 m along +x; the
+  // flight passes between them. Every second gate has a 2 cm wire across at 6 m.
+  for (int g = 0; g < 6; ++g) {
+    const double x = 15.0 + 12.0 * g;
+    const double offset = (g % 2 == 0) ? 0.0 : 1.5;
+    const double y_left = 3.5 + offset, y_right = -3.5 + offset;
+    s.scene.addBox({x - 0.2, y_left - 0.2, 0.0}, {x + 0.2, y_left + 0.2, 8.0});
+    s.scene.addBox({x - 0.2, y_right - 0.2, 0.0}, {x + 0.2, y_right + 0.2, 8.0});
+    if (g % 2 == 1) s.scene.addBox({x - 0.01, y_right, 5.99}, {x + 0.01, y_left, 6.01});
+  }
+  // Single posts off the path and a shed.
+  s.scene.addBox({30.0, 10.0, 0.0}, {30.5, 10.5, 6.0});
+  s.scene.addBox({50.0, -11.0, 0.0}, {50.5, -10.5, 7.0});
+  s.scene.addBox({70.0, 9.0, 0.0}, {76.0, 15.0, 3.5}, /*textureless=*/true);  // a white shed
+  s.camera = StereoCameraConfig();
+  s.effects.sky_unmatched_above_row = 120;
+  s.T_B_C = forwardCamera(0.15);
+  s.frame_rate_hz = 10.0;
+  // 4 m/s at 4 m altitude with a gentle weave, 20 s.
+  for (int i = 0; i < 200; ++i) {
+    const double t = i / s.frame_rate_hz;
+    const double y = 0.75 * std::sin(0.4 * t);
+    const double yaw = std::atan2(0.75 * 0.4 * std::cos(0.4 * t), 4.0);
+    s.T_W_B.push_back(bodyPose({4.0 * t, y, 4.0 + 0.3 * std::sin(0.25 * t)}, yaw));
+  }
+  return s;
+}
+
+FlightScenario housesScenario() {
+  FlightScenario s;
+  s.name = "houses";
+  s.scene.ground_height_m = 0.0;
+  // Houses on both sides of a street along +x: walls and a roof block each.
+  for (int k = 0; k < 6; ++k) {
+    const double x = 12.0 + 16.0 * k;
+    const double h = 5.0 + 2.0 * (k % 3);
+    s.scene.addBox({x, 9.0, 0.0}, {x + 10.0, 17.0, h});                // left house
+    s.scene.addBox({x + 1.0, 10.0, h}, {x + 9.0, 16.0, h + 2.0});      // its roof
+    s.scene.addBox({x + 4.0, -18.0, 0.0}, {x + 12.0, -10.0, h - 1.0});  // right house
+  }
+  // Trees as trunks with crowns, a lamp post every 20 m.
+  for (int k = 0; k < 5; ++k) {
+    const double x = 20.0 + 20.0 * k;
+    s.scene.addBox({x - 0.15, 6.0, 0.0}, {x + 0.15, 6.3, 6.0});
+    s.scene.addBox({x + 8.0, -7.3, 0.0}, {x + 8.4, -6.9, 3.0});
+    s.scene.addBox({x + 6.8, -8.3, 3.0}, {x + 9.6, -5.9, 5.5});
+  }
+  s.camera = StereoCameraConfig();
+  s.effects.sky_unmatched_above_row = 100;
+  s.T_B_C = forwardCamera(0.25);
+  s.frame_rate_hz = 10.0;
+  // 5 m/s at 8 m altitude down the street, turning slightly left then right, 20 s.
+  for (int i = 0; i < 200; ++i) {
+    const double t = i / s.frame_rate_hz;
+    const double yaw = 0.15 * std::sin(0.3 * t);
+    s.T_W_B.push_back(bodyPose({5.0 * t, 1.0 * std::sin(0.3 * t), 8.0}, yaw));
+  }
+  return s;
+}
+
+}  // namespace
+
+std::vector<std::string> scenarioNames() { return {"posts", "houses"}; }
+
+FlightScenario makeScenario(const std::string& name) {
+  if (name == "posts") return postsScenario();
+  if (name == "houses") return housesScenario();
+  throw std::invalid_argument("unknown scenario '" + name + "' (posts, houses)");
+}
+
+namespace {
+cv::Mat render(const FlightScenario& s, size_t frame, cv::Mat* true_depth, cv::Mat* hit_index) {
+  const StereoCameraModel camera(s.camera);
+  const Eigen::Isometry3d T_W_C = s.cameraPose(frame);
+  const Eigen::Matrix3d R_W_C = T_W_C.linear();
+  cv::Mat disparity(s.camera.height_px, s.camera.width_px, CV_32FC1);
+  if (true_depth) true_depth->create(disparity.size(), CV_32FC1);
+  if (hit_index) hit_index->create(disparity.size(), CV_32SC1);
+  for (int y = 0; y < disparity.rows; ++y) {
+    for (int x = 0; x < disparity.cols; ++x) {
+      const Eigen::Vector3d ray = camera.rayThroughPixel(x, y);
+      const double norm = ray.norm();
+      int hit = SyntheticScene::kHitNothing;
+      const double range = s.scene.castRay(T_W_C.translation(), R_W_C * (ray / norm), &hit);
+      const double z = range / norm;
+      disparity.at<float>(y, x) = std::isfinite(z) ? static_cast<float>(camera.disparityFromDepth(z)) : 0.0f;
+      if (true_depth) true_depth->at<float>(y, x) = static_cast<float>(z);
+      if (hit_index) hit_index->at<int>(y, x) = hit;
+    }
+  }
+  return disparity;
+}
+}  // namespace
+
+cv::Mat renderTrueDisparity(const FlightScenario& scenario, size_t frame, cv::Mat* true_depth) {
+  return render(scenario, frame, true_depth, nullptr);
+}
+
+cv::Mat renderStereoFrame(const FlightScenario& s, size_t frame, uint32_t seed) {
+  cv::Mat hit;
+  cv::Mat d = render(s, frame, nullptr, &hit);
+  std::mt19937 rng(seed * 2654435761u + static_cast<uint32_t>(frame));
+  std::normal_distribution<float> noise(0.0f, static_cast<float>(s.effects.noise_sigma_px));
+  std::uniform_real_distribution<float> uniform(0.0f, 1.0f);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float step = static_cast<float>(s.effects.subpixel_step_px);
+  for (int y = 0; y < d.rows; ++y) {
+    for (int x = 0; x < d.cols; ++x) {
+      float& v = d.at<float>(y, x);
+      const int h = hit.at<int>(y, x);
+      if (h == SyntheticScene::kHitNothing) {  // sky
+        v = (s.effects.sky_unmatched_above_row >= 0 && y < s.effects.sky_unmatched_above_row) ? nan : 0.0f;
+        continue;
+      }
+      if (h >= 0 && s.scene.textureless[h]) {
+        v = nan;
+        continue;
+      }
+      if (uniform(rng) < s.effects.unmatched_fraction) {
+        v = nan;
+        continue;
+      }
+      v += noise(rng);
+      if (step > 0.0f) v = std::round(v / step) * step;
+      if (v < s.effects.min_search_disparity_px) v = 0.0f;       // too far for the search range
+      else if (v > s.effects.max_search_disparity_px) v = nan;  // too near for the search range
+    }
+  }
+  return d;
+}
+
+std::string describeScene(const SyntheticScene& scene) {
+  std::ostringstream out;
+  if (scene.ground_height_m) out << "ground z=" << *scene.ground_height_m << "\n";
+  for (size_t i = 0; i < scene.boxes.size(); ++i) {
+    const auto& b = scene.boxes[i];
+    out << "box " << b.min().x() << " " << b.min().y() << " " << b.min().z() << " " << b.max().x() << " "
+        << b.max().y() << " " << b.max().z() << (scene.textureless[i] ? " textureless" : "") << "\n";
+  }
+  return out.str();
+}
+
+}  // namespace stereo_occupancy

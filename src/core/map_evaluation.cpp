@@ -1,0 +1,85 @@
+#include "stereo_occupancy/map_evaluation.h"
+
+#include <cmath>
+#include <sstream>
+
+#include "stereo_occupancy/local_grid.h"
+
+namespace stereo_occupancy {
+
+ObservedGroundTruth observeGroundTruth(const FlightScenario& scenario, double resolution_m, double max_range_m,
+                                       int frame_step, int pixel_step) {
+  ObservedGroundTruth truth;
+  truth.resolution_m = resolution_m;
+  const StereoCameraModel camera(scenario.camera);
+  const double c = resolution_m;
+  for (size_t f = 0; f < scenario.T_W_B.size(); f += static_cast<size_t>(frame_step)) {
+    const Eigen::Isometry3d T_W_C = scenario.cameraPose(f);
+    for (int y = pixel_step / 2; y < scenario.camera.height_px; y += pixel_step) {
+      for (int x = pixel_step / 2; x < scenario.camera.width_px; x += pixel_step) {
+        const Eigen::Vector3d W_dir = T_W_C.linear() * camera.rayThroughPixel(x, y).normalized();
+        const double range = scenario.scene.castRay(T_W_C.translation(), W_dir);
+        // The cell just behind the hit point holds the solid (a point on a face
+        // that the ray meets from the cell's far side belongs to the cell in front).
+        if (range <= max_range_m)
+          truth.surface.insert(packCell(LocalGrid::globalIndex(T_W_C.translation() + (range + 1e-6) * W_dir, c)));
+        const double empty_until = std::min(range - 1.5 * c, max_range_m);
+        for (double l = 0.5 * c; l < empty_until; l += 0.5 * c) {
+          const Eigen::Vector3d p = T_W_C.translation() + l * W_dir;
+          if (scenario.scene.distance(p) > 0.9 * c) truth.empty.insert(packCell(LocalGrid::globalIndex(p, c)));
+        }
+      }
+    }
+  }
+  return truth;
+}
+
+std::string MapQuality::toJson() const {
+  std::ostringstream out;
+  out << "{\"occupied_cells\": " << occupied_cells << ", \"occupied_at_surface\": " << occupied_at_surface
+      << ", \"truth_surface_cells\": " << truth_surface_cells << ", \"surface_found\": " << surface_found
+      << ", \"surface_called_free\": " << surface_called_free << ", \"truth_empty_cells\": " << truth_empty_cells
+      << ", \"empty_known_free\": " << empty_known_free << ", \"occupied_precision\": " << occupiedPrecision()
+      << ", \"occupied_recall\": " << occupiedRecall() << ", \"surface_called_free_fraction\": "
+      << surfaceCalledFree() << ", \"free_coverage\": " << freeCoverage() << "}";
+  return out.str();
+}
+
+MapQuality evaluateMap(const octomap::OcTree& map, const SyntheticScene& scene, const ObservedGroundTruth& truth) {
+  MapQuality q;
+  const double c = map.getResolution();
+  // Occupied leaves within one cell of a true surface (a leaf may be larger than one cell).
+  for (auto it = map.begin_leafs(), end = map.end_leafs(); it != end; ++it) {
+    if (!map.isNodeOccupied(*it)) continue;
+    ++q.occupied_cells;
+    const double half = 0.5 * it.getSize();
+    const double tolerance = std::sqrt(3.0) * half + c;
+    if (scene.distance(Eigen::Vector3d(it.getX(), it.getY(), it.getZ())) <= tolerance) ++q.occupied_at_surface;
+  }
+  auto node = [&](const Eigen::Vector3i& g) {
+    const Eigen::Vector3d p = (g.cast<double>().array() + 0.5).matrix() * c;
+    return map.search(p.x(), p.y(), p.z());
+  };
+  for (uint64_t key : truth.surface) {
+    const Eigen::Vector3i g = unpackCell(key);
+    ++q.truth_surface_cells;
+    const octomap::OcTreeNode* own = node(g);
+    if (own && !map.isNodeOccupied(own)) ++q.surface_called_free;
+    bool found = false;
+    for (int dz = -1; dz <= 1 && !found; ++dz)
+      for (int dy = -1; dy <= 1 && !found; ++dy)
+        for (int dx = -1; dx <= 1 && !found; ++dx) {
+          const octomap::OcTreeNode* n = node(g + Eigen::Vector3i(dx, dy, dz));
+          found = n && map.isNodeOccupied(n);
+        }
+    q.surface_found += found;
+  }
+  for (uint64_t key : truth.empty) {
+    ++q.truth_empty_cells;
+    const octomap::OcTreeNode* n = node(unpackCell(key));
+    q.empty_known_free += n && !map.isNodeOccupied(n);
+  }
+  return q;
+}
+
+}  // namespace stereo_occupancy
