@@ -6,6 +6,7 @@
 
 #include <opencv2/core.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -54,8 +55,15 @@ class DisparityPyramid {
     return levels_[0].ptr<float>(y >> -i)[x >> -i];
   }
 
-  /// Image x coordinate (level 0 pixels) of the centre of pixel x at level i.
-  static double centreOf(int i, int x) { return std::ldexp(x + 0.5, i) - 0.5; }
+  /// Image coordinate (level 0 pixels) of the centre of pixel x at level i,
+  /// along an axis with @p size0 level-0 pixels: the centre of the level-0
+  /// pixels the block covers (a block at the right or bottom edge may be cut).
+  static double centreOf(int i, int x, int size0) {
+    if (i <= 0) return std::ldexp(x + 0.5, i) - 0.5;
+    const double first = std::ldexp(static_cast<double>(x), i);
+    const double last = std::min(std::ldexp(static_cast<double>(x + 1), i), static_cast<double>(size0)) - 1.0;
+    return 0.5 * (first + last);
+  }
 
  private:
   PyramidType type_ = PyramidType::kMinDisparity;

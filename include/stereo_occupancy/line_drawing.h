@@ -34,7 +34,8 @@ class LineDrawer {
 
   /// Draws the ray from the camera centre along the unit direction W_dir with
   /// the profile of one measurement, up to min(profile end, max range).
-  /// Returns the number of cells drawn.
+  /// Returns the number of cells written; parts of the ray outside the grid
+  /// are skipped.
   uint64_t drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vector3d& W_dir, const RangeProfile& profile,
                    LocalGrid* grid) const;
 

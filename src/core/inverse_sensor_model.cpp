@@ -103,7 +103,9 @@ RangeProfile LogOddsTable::freeProfile() const {
 
 RangeProfile pixelProfile(const StereoCameraModel& camera, const LogOddsTable& table, double x_px, double y_px,
                           float d_px) {
-  if (!(d_px > 0.0f)) return table.freeProfile();  // zero disparity: infinitely far
+  // Zero disparity is infinitely far; so is a positive one whose depth is
+  // beyond a thousand times the range (its Δl would overflow).
+  if (!(d_px > 1e-3 * camera.farDisparity())) return table.freeProfile();
   const double z = camera.depthFromDisparity(d_px);              // eq. 1
   const double n = camera.rayThroughPixel(x_px, y_px).norm();    // |p_c| / z_c (eq. 2)
   const double l_p = z * n;                                      // eq. 6

@@ -41,20 +41,28 @@ uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vecto
   };
   // The first and the last slab are only partly on the segment: sample the
   // segment point nearest to the centre plane.
+  // The first and the last slab are only partly on the segment: sample the
+  // segment point nearest to the centre plane. Cells outside the grid are
+  // skipped (only possible when the grid does not cover the segment).
+  uint64_t written = 0;
   auto endCell = [&](int km, double t) {
     t = std::clamp(t, 0.0, t_end);
-    const int ka = std::clamp(static_cast<int>(std::floor(g0[a] + W_dir[a] * t)), 0, na);
-    const int kb = std::clamp(static_cast<int>(std::floor(g0[b] + W_dir[b] * t)), 0, nb);
-    put(std::clamp(km, 0, nm) * stride[m] + ka * stride[a] + kb * stride[b], profile.at(static_cast<float>(t * c)));
+    const int ka = static_cast<int>(std::floor(g0[a] + W_dir[a] * t));
+    const int kb = static_cast<int>(std::floor(g0[b] + W_dir[b] * t));
+    if (km < 0 || km > nm || ka < 0 || ka > na || kb < 0 || kb > nb) return;
+    put(km * stride[m] + ka * stride[a] + kb * stride[b], profile.at(static_cast<float>(t * c)));
+    ++written;
   };
   endCell(k0, t0);
-  if (n == 1) return 1;
+  if (n == 1) return written;
 
   // Inner slabs 1 .. n-2: 0 < t < t_end, so their cells lie on the segment.
+  // The minor coordinates step in 32.32 fixed point: exact sums, floor by shift.
+  constexpr double kOne = 4294967296.0;  // 2^32
   const float t1 = static_cast<float>(t0 + dt);
-  float pa = static_cast<float>(g0[a] + W_dir[a] * (t0 + dt));
-  float pb = static_cast<float>(g0[b] + W_dir[b] * (t0 + dt));
-  const float dta = static_cast<float>(W_dir[a] * dt), dtb = static_cast<float>(W_dir[b] * dt);
+  int64_t pa = std::llround((g0[a] + W_dir[a] * (t0 + dt)) * kOne);
+  int64_t pb = std::llround((g0[b] + W_dir[b] * (t0 + dt)) * kOne);
+  const int64_t dta = std::llround(W_dir[a] * dt * kOne), dtb = std::llround(W_dir[b] * dt * kOne);
   const float dtf = static_cast<float>(dt), cf = static_cast<float>(c);
   int64_t idx_m = static_cast<int64_t>(k0 + step) * stride[m];
   const int64_t didx_m = step * stride[m];
@@ -67,13 +75,14 @@ uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vecto
   // Free space up to the measurement's front: one value for all those cells.
   const int k_free = firstWith(profile.front_m);
   // When both ends lie inside the grid (the usual case: the grid covers the
-  // frustum), so does the segment; truncation is then floor and needs no clamp.
+  // frustum), so does the segment and no index needs a check.
   const Eigen::Vector3d g_end = g0 + W_dir * t_end;
   const double margin = 1e-3;
   const bool inside = (g0.array() >= margin).all() && (g_end.array() >= margin).all() &&
                       (g0.array() < size.cast<double>().array() - margin).all() &&
                       (g_end.array() < size.cast<double>().array() - margin).all();
-  float t = t1;
+  auto cellA = [&]() { return static_cast<int64_t>(pa >> 32); };
+  auto cellB = [&]() { return static_cast<int64_t>(pb >> 32); };
   int k = 1;
   if (inside) {
     // The inner cells in four runs, by the offset u = l - l_p at their
@@ -92,26 +101,28 @@ uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vecto
       pb += dtb;
       idx_m += didx_m;
     };
-    for (; k < k_rise; ++k, advance())
-      put(idx_m + static_cast<int>(pa) * sa + static_cast<int>(pb) * sb, profile.free_log_odds);
+    for (; k < k_rise; ++k, advance()) put(idx_m + cellA() * sa + cellB() * sb, profile.free_log_odds);
     float x = sampleAt(k, hc);
     for (; k < k_peak; ++k, x += dx, advance())
-      put(idx_m + static_cast<int>(pa) * sa + static_cast<int>(pb) * sb, profile.sample(std::max(x, 0.0f)));
+      put(idx_m + cellA() * sa + cellB() * sb, profile.sample(std::max(x, 0.0f)));
     const float peak = profile.sample((-profile.row_origin_m) * profile.samples_per_m);
-    for (; k < k_fall; ++k, advance()) put(idx_m + static_cast<int>(pa) * sa + static_cast<int>(pb) * sb, peak);
+    for (; k < k_fall; ++k, advance()) put(idx_m + cellA() * sa + cellB() * sb, peak);
     x = sampleAt(k, -hc);
     for (; k < n - 1; ++k, x += dx, advance())
-      put(idx_m + static_cast<int>(pa) * sa + static_cast<int>(pb) * sb, profile.sample(std::min(x, x_max)));
+      put(idx_m + cellA() * sa + cellB() * sb, profile.sample(std::min(x, x_max)));
+    written += static_cast<uint64_t>(n - 2);
   } else {
-    for (; k < n - 1; ++k, t += dtf, pa += dta, pb += dtb, idx_m += didx_m) {
-      const int ka = std::min(std::max(static_cast<int>(std::floor(pa)), 0), na);
-      const int kb = std::min(std::max(static_cast<int>(std::floor(pb)), 0), nb);
-      const int km = std::clamp(k0 + k * step, 0, nm);
+    float t = t1;
+    for (; k < n - 1; ++k, t += dtf, pa += dta, pb += dtb) {
+      const int64_t ka = cellA(), kb = cellB();
+      const int km = k0 + k * step;
+      if (km < 0 || km > nm || ka < 0 || ka > na || kb < 0 || kb > nb) continue;
       put(km * stride[m] + ka * sa + kb * sb, k < k_free ? profile.free_log_odds : profile.at(t * cf));
+      ++written;
     }
   }
   endCell(k0 + (n - 1) * step, t0 + (n - 1) * dt);
-  return static_cast<uint64_t>(n);
+  return written;
 }
 
 void LineDrawer::drawImage(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
@@ -135,8 +146,8 @@ void LineDrawer::drawImage(const cv::Mat& disparity, const Eigen::Isometry3d& T_
 
 uint64_t LineDrawer::drawPixel(int level, int x, int y, float d_px, const Eigen::Isometry3d& T_W_C,
                                LocalGrid* grid) const {
-  const double X = DisparityPyramid::centreOf(level, x);
-  const double Y = DisparityPyramid::centreOf(level, y);
+  const double X = DisparityPyramid::centreOf(level, x, camera_.config().width_px);
+  const double Y = DisparityPyramid::centreOf(level, y, camera_.config().height_px);
   const Eigen::Vector3d W_dir = T_W_C.linear() * camera_.rayThroughPixel(X, Y).normalized();
   return drawRay(T_W_C.translation(), W_dir, pixelProfile(camera_, table_, X, Y, d_px), grid);
 }

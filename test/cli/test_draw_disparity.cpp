@@ -4,6 +4,8 @@
 
 #include <octomap/OcTree.h>
 
+#include <sys/wait.h>
+
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -112,7 +114,8 @@ TEST(DrawDisparityCli, BadArgumentsFailWithOneLine) {
         ok + " --resolution abc", ok + " --pose \"1 2 3\"", ok + " --pose \"0 0 0 0 0 0 2\"", ok + " --frobnicate",
         ok + " --repeat 0", ok + " --output map.txt", "--disparity " + pfm + " --focal -700 --baseline 0.3"}) {
     const Result r = run(bad);
-    EXPECT_NE(r.status, 0) << bad;
+    ASSERT_TRUE(WIFEXITED(r.status)) << bad;
+    EXPECT_EQ(WEXITSTATUS(r.status), 2) << bad;
     const std::string err = stderrText();
     EXPECT_NE(err.find("error"), std::string::npos) << bad;
     EXPECT_EQ(err.find('\n'), err.size() - 1) << "not one line: " << err;

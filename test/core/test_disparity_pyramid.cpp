@@ -92,10 +92,15 @@ TEST(DisparityPyramid, EnlargedLevelsObeyEq15) {
         ASSERT_EQ(pyr.at(i, x, y), pyr.at(i + 1, x / 2, y / 2)) << "level " << i;  // d_{i-1}(x,y) = d_i(x/2, y/2)
   }
   // Pixel centres: a level-1 pixel is the centre of its 2x2 block; level -1 halves pixels.
-  EXPECT_DOUBLE_EQ(DisparityPyramid::centreOf(1, 0), 0.5);
-  EXPECT_DOUBLE_EQ(DisparityPyramid::centreOf(2, 1), 5.5);
-  EXPECT_DOUBLE_EQ(DisparityPyramid::centreOf(-1, 0), -0.25);
-  EXPECT_DOUBLE_EQ(DisparityPyramid::centreOf(-1, 1), 0.25);
+  EXPECT_DOUBLE_EQ(DisparityPyramid::centreOf(1, 0, 640), 0.5);
+  EXPECT_DOUBLE_EQ(DisparityPyramid::centreOf(2, 1, 640), 5.5);
+  EXPECT_DOUBLE_EQ(DisparityPyramid::centreOf(-1, 0, 640), -0.25);
+  EXPECT_DOUBLE_EQ(DisparityPyramid::centreOf(-1, 1, 640), 0.25);
+  // Blocks cut by the image's edge: the centre of the pixels they hold.
+  EXPECT_DOUBLE_EQ(DisparityPyramid::centreOf(6, 7, 480), 463.5);  // rows 448..479
+  EXPECT_DOUBLE_EQ(DisparityPyramid::centreOf(8, 2, 640), 575.5);  // columns 512..639
+  EXPECT_DOUBLE_EQ(DisparityPyramid::centreOf(9, 1, 640), 575.5);  // columns 512..639
+  EXPECT_DOUBLE_EQ(DisparityPyramid::centreOf(1, 320, 641), 640.0);
 }
 
 TEST(PyramidLevelTable, LevelChoiceObeysEq13) {
