@@ -16,10 +16,9 @@ seed="${SEED:-1}"
 export PATH="/usr/bin:$PATH"
 
 "$repo/scripts/install_deps.sh"
-"$repo/scripts/build.sh" >"$out.build.log" 2>&1 || { mkdir -p "$out"; cat "$out.build.log"; exit 1; }
-bin="$ws/devel/lib/stereo_occupancy"
 mkdir -p "$out"
-mv -f "$out.build.log" "$out/build.log"
+"$repo/scripts/build.sh" >"$out/build.log" 2>&1 || { cat "$out/build.log"; exit 1; }
+bin="$ws/devel/lib/stereo_occupancy"
 
 bag="$out/${scenario}_seed${seed}.bag"
 if [ ! -f "$bag" ]; then

@@ -30,11 +30,52 @@ void RayTracer::traverse(const Eigen::Isometry3d& T_W_C, LocalGrid* grid, DrawSt
   const Eigen::Vector3d C_step_z = R_C_W.col(2) * c;
   float* data = grid->data();
 
+  // Along a row of cells (fixed y, z) the cell centre moves linearly:
+  // C_p(x) = A + x·S. In front of the camera, inside the image and within
+  // the range are linear and quadratic conditions on x, so each row's
+  // candidate cells form one interval, found in closed form; the exact tests
+  // below still decide each cell.
+  const Eigen::Vector3d& S = C_step_x;
+  const double a_lo = (u_lo - cfg.cx_px) / f, a_hi = (u_hi - cfg.cx_px) / f;
+  const double b_lo = (v_lo - cfg.cy_px) / f, b_hi = (v_hi - cfg.cy_px) / f;
+  auto rowInterval = [&](const Eigen::Vector3d& A, double* x_lo, double* x_hi) {
+    double lo = 0.0, hi = size.x() - 1.0;
+    auto atLeastZero = [&](double p, double q) {  // p + q·x >= 0
+      if (q > 0.0) lo = std::max(lo, -p / q);
+      else if (q < 0.0) hi = std::min(hi, -p / q);
+      else if (p < 0.0) hi = -1.0;
+    };
+    atLeastZero(A.z(), S.z());
+    atLeastZero(A.x() - a_lo * A.z(), S.x() - a_lo * S.z());
+    atLeastZero(a_hi * A.z() - A.x(), a_hi * S.z() - S.x());
+    atLeastZero(A.y() - b_lo * A.z(), S.y() - b_lo * S.z());
+    atLeastZero(b_hi * A.z() - A.y(), b_hi * S.z() - S.y());
+    // |A + x·S|² <= R²
+    const double qa = S.squaredNorm(), qb = A.dot(S), qc = A.squaredNorm() - max_range2;
+    const double disc = qb * qb - qa * qc;
+    if (disc < 0.0) {
+      hi = -1.0;
+    } else {
+      const double root = std::sqrt(disc);
+      lo = std::max(lo, (-qb - root) / qa);
+      hi = std::min(hi, (-qb + root) / qa);
+    }
+    *x_lo = lo;
+    *x_hi = hi;
+  };
+
   for (int z = 0; z < size.z(); ++z) {
     for (int y = 0; y < size.y(); ++y) {
-      Eigen::Vector3d C_p = C_first + y * C_step_y + z * C_step_z;
+      const Eigen::Vector3d A = C_first + y * C_step_y + z * C_step_z;
+      double x_lo, x_hi;
+      rowInterval(A, &x_lo, &x_hi);
+      if (x_hi < x_lo - 1.0) continue;
+      // One cell of slack on each side for rounding; the tests below are exact.
+      const int x_first = std::max(0, static_cast<int>(std::floor(x_lo)) - 1);
+      const int x_last = std::min(size.x() - 1, static_cast<int>(std::ceil(x_hi)) + 1);
+      Eigen::Vector3d C_p = A + x_first * S;
       float* row = data + grid->linearIndex(0, y, z);
-      for (int x = 0; x < size.x(); ++x, C_p += C_step_x) {
+      for (int x = x_first; x <= x_last; ++x, C_p += S) {
         if (C_p.z() <= 0.0) continue;
         const double inv_z = 1.0 / C_p.z();
         const double u = f * C_p.x() * inv_z + cfg.cx_px;  // step 2b
