@@ -1,6 +1,8 @@
 #include "stereo_occupancy/ros/parameters.h"
 
 #include <cmath>
+#include <cstdlib>
+#include <set>
 
 namespace stereo_occupancy {
 
@@ -39,44 +41,120 @@ bool OctomapAccumulatorParameters::isValid(std::string* why) const {
   return map.isValid(why);
 }
 
-bool loadParameters(const ros::NodeHandle& nh, DisparityMapperParameters* p, std::string* why) {
-  nh.param("world_frame", p->world_frame, p->world_frame);
-  nh.param("tf_timeout_s", p->tf_timeout_s, p->tf_timeout_s);
-  nh.param("queue_size", p->queue_size, p->queue_size);
-  nh.param("use_depth", p->use_depth, p->use_depth);
-  nh.param("depth_baseline_m", p->depth_baseline_m, p->depth_baseline_m);
-  nh.param("cx_px", p->cx_px, p->cx_px);
-  nh.param("cy_px", p->cy_px, p->cy_px);
-  nh.param("max_image_pixels", p->max_image_pixels, p->max_image_pixels);
-  nh.param("min_range_m", p->camera.min_range_m, p->camera.min_range_m);
-  nh.param("max_range_m", p->camera.max_range_m, p->camera.max_range_m);
-  nh.param("delta_d_px", p->camera.delta_d_px, p->camera.delta_d_px);
+namespace {
+
+/// Reads every mapper parameter through read(name, value), which leaves
+/// value unchanged when the source does not have the name.
+template <class Read>
+bool readParameters(Read&& read, DisparityMapperParameters* p, std::string* why) {
+  read("world_frame", p->world_frame);
+  read("tf_timeout_s", p->tf_timeout_s);
+  read("queue_size", p->queue_size);
+  read("use_depth", p->use_depth);
+  read("depth_baseline_m", p->depth_baseline_m);
+  read("cx_px", p->cx_px);
+  read("cy_px", p->cy_px);
+  read("max_image_pixels", p->max_image_pixels);
+  read("min_range_m", p->camera.min_range_m);
+  read("max_range_m", p->camera.max_range_m);
+  read("delta_d_px", p->camera.delta_d_px);
   std::string algorithm = toString(p->drawing.algorithm);
-  nh.param("algorithm", algorithm, algorithm);
+  read("algorithm", algorithm);
   if (!parseDrawingAlgorithm(algorithm, &p->drawing.algorithm))
     return fail(why, "algorithm must be one of line, line_pyramid, raytrace, raytrace_pyramid (got '" + algorithm +
                          "')");
-  nh.param("resolution_m", p->drawing.resolution_m, p->drawing.resolution_m);
-  nh.param("k_m", p->drawing.sensor_model.k_m, p->drawing.sensor_model.k_m);
-  nh.param("p_min", p->drawing.sensor_model.p_min, p->drawing.sensor_model.p_min);
-  nh.param("p_max", p->drawing.sensor_model.p_max, p->drawing.sensor_model.p_max);
-  nh.param("sigma_trans_m", p->drawing.blur.sigma_trans_m, p->drawing.blur.sigma_trans_m);
-  nh.param("sigma_angle_rad", p->drawing.blur.sigma_angle_rad, p->drawing.blur.sigma_angle_rad);
-  nh.param("sigma_step_cells", p->drawing.blur.sigma_step_cells, p->drawing.blur.sigma_step_cells);
+  read("resolution_m", p->drawing.resolution_m);
+  read("k_m", p->drawing.sensor_model.k_m);
+  read("p_min", p->drawing.sensor_model.p_min);
+  read("p_max", p->drawing.sensor_model.p_max);
+  read("sigma_trans_m", p->drawing.blur.sigma_trans_m);
+  read("sigma_angle_rad", p->drawing.blur.sigma_angle_rad);
+  read("sigma_step_cells", p->drawing.blur.sigma_step_cells);
   return p->isValid(why);
 }
 
-bool loadParameters(const ros::NodeHandle& nh, OctomapAccumulatorParameters* p, std::string* why) {
-  nh.param("resolution_m", p->map.resolution_m, p->map.resolution_m);
-  nh.param("clamping_min_prob", p->map.clamping_min_prob, p->map.clamping_min_prob);
-  nh.param("clamping_max_prob", p->map.clamping_max_prob, p->map.clamping_max_prob);
-  nh.param("occupancy_threshold_prob", p->map.occupancy_threshold_prob, p->map.occupancy_threshold_prob);
-  nh.param("max_extent_m", p->map.max_extent_m, p->map.max_extent_m);
-  nh.param("publish_rate_hz", p->publish_rate_hz, p->publish_rate_hz);
-  nh.param("prune_period_s", p->prune_period_s, p->prune_period_s);
-  nh.param("save_dir", p->save_dir, p->save_dir);
-  nh.param("map_name", p->map_name, p->map_name);
+template <class Read>
+bool readParameters(Read&& read, OctomapAccumulatorParameters* p, std::string* why) {
+  read("resolution_m", p->map.resolution_m);
+  read("clamping_min_prob", p->map.clamping_min_prob);
+  read("clamping_max_prob", p->map.clamping_max_prob);
+  read("occupancy_threshold_prob", p->map.occupancy_threshold_prob);
+  read("max_extent_m", p->map.max_extent_m);
+  read("publish_rate_hz", p->publish_rate_hz);
+  read("prune_period_s", p->prune_period_s);
+  read("save_dir", p->save_dir);
+  read("map_name", p->map_name);
   return p->isValid(why);
+}
+
+/// Reads from name=value pairs; remembers which names it was asked for and
+/// values it could not parse.
+class PairReader {
+ public:
+  explicit PairReader(const std::map<std::string, std::string>& values) : values_(values) {}
+
+  template <class T>
+  void operator()(const char* name, T& value) {
+    asked_.insert(name);
+    const auto it = values_.find(name);
+    if (it == values_.end()) return;
+    T parsed = value;
+    if (parse(it->second, &parsed)) value = parsed;
+    else if (error_.empty()) error_ = std::string(name) + ": cannot read '" + it->second + "'";
+  }
+  const std::set<std::string>& asked() const { return asked_; }
+  const std::string& error() const { return error_; }
+
+ private:
+  static bool parse(const std::string& s, std::string* v) {
+    *v = s;
+    return true;
+  }
+  static bool parse(const std::string& s, double* v) {
+    char* end = nullptr;
+    *v = std::strtod(s.c_str(), &end);
+    return !s.empty() && *end == '\0';
+  }
+  static bool parse(const std::string& s, int* v) {
+    char* end = nullptr;
+    const long l = std::strtol(s.c_str(), &end, 10);
+    *v = static_cast<int>(l);
+    return !s.empty() && *end == '\0' && l == *v;
+  }
+  static bool parse(const std::string& s, bool* v) {
+    if (s == "true" || s == "1") *v = true;
+    else if (s == "false" || s == "0") *v = false;
+    else return false;
+    return true;
+  }
+
+  const std::map<std::string, std::string>& values_;
+  std::set<std::string> asked_;
+  std::string error_;
+};
+
+}  // namespace
+
+bool loadParameters(const ros::NodeHandle& nh, DisparityMapperParameters* p, std::string* why) {
+  return readParameters([&](const char* name, auto& value) { nh.param(name, value, value); }, p, why);
+}
+
+bool loadParameters(const ros::NodeHandle& nh, OctomapAccumulatorParameters* p, std::string* why) {
+  return readParameters([&](const char* name, auto& value) { nh.param(name, value, value); }, p, why);
+}
+
+bool loadParameters(const std::map<std::string, std::string>& values, DisparityMapperParameters* mapper,
+                    OctomapAccumulatorParameters* accumulator, std::string* why) {
+  PairReader read(values);
+  const bool mapper_ok = readParameters(read, mapper, why);
+  if (!read.error().empty()) return fail(why, read.error());
+  if (!mapper_ok) return false;
+  const bool accumulator_ok = readParameters(read, accumulator, why);
+  if (!read.error().empty()) return fail(why, read.error());
+  if (!accumulator_ok) return false;
+  for (const auto& kv : values)
+    if (!read.asked().count(kv.first)) return fail(why, "unknown parameter '" + kv.first + "'");
+  return true;
 }
 
 }  // namespace stereo_occupancy

@@ -16,15 +16,18 @@ namespace so = stereo_occupancy;
 int main(int argc, char** argv) {
   std::string map_path, scenario_name, views_prefix;
   double max_range = 25.0;
+  long frames = -1;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--map" && i + 1 < argc) map_path = argv[++i];
     else if (a == "--scenario" && i + 1 < argc) scenario_name = argv[++i];
     else if (a == "--max-range" && i + 1 < argc) max_range = std::stod(argv[++i]);
     else if (a == "--views" && i + 1 < argc) views_prefix = argv[++i];
+    else if (a == "--frames" && i + 1 < argc) frames = std::stol(argv[++i]);
     else {
       std::cerr << "usage: evaluate_map --map FILE.bt|FILE.ot --scenario posts|houses [--max-range M]"
-                   " [--views PREFIX (writes PREFIX_top.png, PREFIX_side.png)]\n";
+                   " [--frames N (the flight's first N frames were mapped)]\n"
+                   "                    [--views PREFIX (writes PREFIX_top.png, PREFIX_side.png)]\n";
       return a == "--help" ? 0 : 2;
     }
   }
@@ -44,7 +47,8 @@ int main(int argc, char** argv) {
       tree.release();
       map.reset(oc);
     }
-    const so::FlightScenario scenario = so::makeScenario(scenario_name);
+    so::FlightScenario scenario = so::makeScenario(scenario_name);
+    if (frames > 0 && static_cast<size_t>(frames) < scenario.T_W_B.size()) scenario.T_W_B.resize(frames);
     const so::ObservedGroundTruth truth = so::observeGroundTruth(scenario, map->getResolution(), max_range, 5, 4);
     std::cout << so::evaluateMap(*map, scenario.scene, truth).toJson() << std::endl;
     if (!views_prefix.empty()) {

@@ -126,6 +126,30 @@ TEST(Parameters, DefaultsAreValidAndBadValuesNameTheParameter) {
   EXPECT_NE(why.find("map_name"), std::string::npos);
 }
 
+TEST(Parameters, FromNameValuePairs) {
+  DisparityMapperParameters mapper;
+  OctomapAccumulatorParameters accumulator;
+  std::string why;
+  ASSERT_TRUE(loadParameters({{"algorithm", "raytrace"}, {"resolution_m", "0.5"}, {"use_depth", "true"},
+                              {"queue_size", "7"}, {"map_name", "flight"}},
+                             &mapper, &accumulator, &why))
+      << why;
+  EXPECT_EQ(mapper.drawing.algorithm, DrawingAlgorithm::kRayTrace);
+  EXPECT_DOUBLE_EQ(mapper.drawing.resolution_m, 0.5);
+  EXPECT_DOUBLE_EQ(accumulator.map.resolution_m, 0.5);  // a name both have sets both
+  EXPECT_TRUE(mapper.use_depth);
+  EXPECT_EQ(mapper.queue_size, 7);
+  EXPECT_EQ(accumulator.map_name, "flight");
+  mapper = DisparityMapperParameters();
+  EXPECT_FALSE(loadParameters({{"resolution", "0.5"}}, &mapper, &accumulator, &why));
+  EXPECT_NE(why.find("unknown parameter 'resolution'"), std::string::npos) << why;
+  EXPECT_FALSE(loadParameters({{"queue_size", "many"}}, &mapper, &accumulator, &why));
+  EXPECT_NE(why.find("queue_size"), std::string::npos) << why;
+  EXPECT_EQ(mapper.queue_size, 5);  // unchanged by the unreadable value
+  EXPECT_FALSE(loadParameters({{"p_min", "0.8"}}, &mapper, &accumulator, &why));
+  EXPECT_NE(why.find("p_min"), std::string::npos) << why;
+}
+
 TEST(Conversions, OctreeToMessageAndBack) {
   octomap::OcTree tree(0.25);
   tree.updateNode(octomap::point3d(1.1f, 2.2f, 0.3f), true);

@@ -5,6 +5,7 @@
 
 #include <ros/node_handle.h>
 
+#include <map>
 #include <string>
 
 #include "stereo_occupancy/disparity_drawer.h"
@@ -47,5 +48,11 @@ struct OctomapAccumulatorParameters {
 /// range in @p why.
 bool loadParameters(const ros::NodeHandle& private_nh, DisparityMapperParameters* params, std::string* why);
 bool loadParameters(const ros::NodeHandle& private_nh, OctomapAccumulatorParameters* params, std::string* why);
+
+/// The same from name=value pairs (the offline tools): the names of both
+/// nodelets' parameters (a name both have, such as resolution_m, sets both).
+/// Unknown names and unreadable values are errors.
+bool loadParameters(const std::map<std::string, std::string>& values, DisparityMapperParameters* mapper,
+                    OctomapAccumulatorParameters* accumulator, std::string* why);
 
 }  // namespace stereo_occupancy
