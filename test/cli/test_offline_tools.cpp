@@ -33,7 +33,33 @@ double jsonNumber(const std::string& json, const std::string& key) {
   return std::stod(json.substr(pos + key.size() + 4));
 }
 
+size_t fileSize(const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return 0;
+  std::fseek(f, 0, SEEK_END);
+  const long n = std::ftell(f);
+  std::fclose(f);
+  return n > 0 ? static_cast<size_t>(n) : 0;
+}
+
 }  // namespace
+
+TEST(OfflineTools, CompareWithOctomapPrintsEveryMethod) {
+  const Result r = run(std::string(COMPARE_OCTOMAP_EXE) + " --scenario posts --frame-step 50 --resolution 1.0");
+  ASSERT_EQ(r.status, 0);
+  for (const char* method : {"| line |", "| line_pyramid |", "| raytrace |", "| raytrace_pyramid |",
+                             "| OctoMap insertPointCloud |", "| OctoMap insertPointCloud, discretize |"})
+    EXPECT_NE(r.out.find(method), std::string::npos) << method << "\n" << r.out;
+}
+
+TEST(OfflineTools, FiguresAreWritten) {
+  const std::string dir = ::testing::TempDir();
+  ASSERT_EQ(run(std::string(MAKE_FIGURES_EXE) + " " + dir).status, 0);
+  for (const char* f : {"fig1_inverse_sensor_model.png", "fig3_pyramid_levels.png", "fig5_blur.png"}) {
+    EXPECT_GT(fileSize(dir + f), 10000u) << f;
+    std::remove((dir + f).c_str());
+  }
+}
 
 TEST(OfflineTools, SimulateMapAndScoreAFlight) {
   const std::string dir = ::testing::TempDir();
