@@ -3,10 +3,12 @@
 // it: stereo_msgs/DisparityImage on /stereo/disparity, the rectified left
 // camera_info, and /tf with map -> base_link -> camera_optical (REP-103/105).
 // The ground truth goes beside it: the scene on /ground_truth/scene and in
-// <bag>.scene.txt. No roscore needed.
+// <bag>.scene.txt, and with --true-depth each frame's exact depth on
+// /ground_truth/depth. No roscore needed.
 
 #include <rosbag/bag.h>
 #include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
 #include <std_msgs/String.h>
 #include <stereo_msgs/DisparityImage.h>
 #include <tf2_msgs/TFMessage.h>
@@ -40,7 +42,9 @@ geometry_msgs::TransformStamped toTransform(const Eigen::Isometry3d& T, const ro
 }
 
 int usage(int code) {
-  std::cerr << "usage: simulate_flight --scenario posts|houses --output FILE.bag [--seed N] [--frames N]\n";
+  std::cerr << "usage: simulate_flight --scenario posts|houses --output FILE.bag [--seed N] [--frames N]"
+               " [--true-depth]\n"
+               "  --true-depth  also write each frame's exact depth (32FC1, m; inf: sky) on /ground_truth/depth\n";
   return code;
 }
 
@@ -50,12 +54,14 @@ int main(int argc, char** argv) {
   std::string scenario_name, output;
   uint32_t seed = 1;
   long frames = -1;
+  bool true_depth = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--scenario" && i + 1 < argc) scenario_name = argv[++i];
     else if (a == "--output" && i + 1 < argc) output = argv[++i];
     else if (a == "--seed" && i + 1 < argc) seed = static_cast<uint32_t>(std::stoul(argv[++i]));
     else if (a == "--frames" && i + 1 < argc) frames = std::stol(argv[++i]);
+    else if (a == "--true-depth") true_depth = true;
     else return usage(a == "--help" ? 0 : 2);
   }
   if (scenario_name.empty() || output.empty()) return usage(2);
@@ -106,6 +112,19 @@ int main(int argc, char** argv) {
       msg.valid_window.width = d.cols;
       msg.valid_window.height = d.rows;
       bag.write("/stereo/disparity", stamp + ros::Duration(0.001), msg);
+      if (true_depth) {
+        cv::Mat depth;
+        so::renderTrueDisparity(s, i, &depth);
+        sensor_msgs::Image truth;
+        truth.header = msg.header;
+        truth.width = depth.cols;
+        truth.height = depth.rows;
+        truth.encoding = "32FC1";
+        truth.step = depth.cols * 4;
+        truth.data.resize(depth.total() * 4);
+        std::memcpy(truth.data.data(), depth.data, truth.data.size());
+        bag.write("/ground_truth/depth", stamp + ros::Duration(0.001), truth);
+      }
       info.header.stamp = stamp;
       bag.write("/stereo/left/camera_info", stamp + ros::Duration(0.001), info);
       if (i % 20 == 0) std::cerr << "\rsimulate_flight: " << s.name << " frame " << i + 1 << "/" << n << std::flush;

@@ -64,7 +64,7 @@ TEST(OfflineTools, FiguresAreWritten) {
 TEST(OfflineTools, SimulateMapAndScoreAFlight) {
   const std::string dir = ::testing::TempDir();
   const std::string bag = dir + "offline_posts.bag";
-  ASSERT_EQ(run(std::string(SIMULATE_FLIGHT_EXE) + " --scenario posts --frames 30 --seed 3 --output " + bag).status, 0);
+  ASSERT_EQ(run(std::string(SIMULATE_FLIGHT_EXE) + " --scenario posts --frames 30 --seed 3 --true-depth --output " + bag).status, 0);
 
   const Result mapped = run(std::string(BAG_TO_MAP_EXE) + " --bag " + bag + " --output " + dir + "offline_posts");
   ASSERT_EQ(mapped.status, 0) << mapped.out;
