@@ -36,6 +36,7 @@ class MapAccumulator {
   ~MapAccumulator();
 
   const MapAccumulatorConfig& config() const { return config_; }
+  /// The map, its inner nodes brought up to date first.
   const octomap::OcTree& tree() const;
 
   /// Adds every cell's log-odds to the map (octomap's clamped update).
@@ -65,6 +66,7 @@ class MapAccumulator {
   std::unique_ptr<RebuildableOcTree> tree_;
   Eigen::Vector3d W_last_origin_ = Eigen::Vector3d::Zero();
   size_t updates_ = 0;
+  mutable bool inner_stale_ = false;  ///< inner nodes lag the leaves until tree() is called
 };
 
 }  // namespace stereo_occupancy

@@ -52,7 +52,15 @@ MapAccumulator::MapAccumulator(const MapAccumulatorConfig& config) : config_(con
 
 MapAccumulator::~MapAccumulator() = default;
 
-const octomap::OcTree& MapAccumulator::tree() const { return *tree_; }
+const octomap::OcTree& MapAccumulator::tree() const {
+  // Inner nodes are brought up to date only when someone looks: a full pass
+  // over the tree per update would cost more than the update as the map grows.
+  if (inner_stale_) {
+    tree_->updateInnerOccupancy();
+    inner_stale_ = false;
+  }
+  return *tree_;
+}
 
 void MapAccumulator::applyThresholds() {
   tree_->setClampingThresMin(config_.clamping_min_prob);
@@ -61,6 +69,7 @@ void MapAccumulator::applyThresholds() {
 }
 
 void MapAccumulator::reset() {
+  inner_stale_ = false;
   tree_ = std::make_unique<RebuildableOcTree>(config_.resolution_m);
   applyThresholds();
   updates_ = 0;
@@ -80,7 +89,7 @@ bool MapAccumulator::integrate(const GridUpdate& update, std::string* why) {
     if ((k.array() < 0).any() || (k.array() > 65535).any()) return;  // outside OcTree's extent
     tree_->updateNode(octomap::OcTreeKey(k.x(), k.y(), k.z()), log_odds, /*lazy_eval=*/true);
   });
-  tree_->updateInnerOccupancy();
+  inner_stale_ = true;
   W_last_origin_ = update.W_sensor_origin;
   ++updates_;
   return true;
@@ -88,6 +97,7 @@ bool MapAccumulator::integrate(const GridUpdate& update, std::string* why) {
 
 size_t MapAccumulator::prune() {
   if (config_.max_extent_m <= 0.0) return 0;
+  tree();  // inner nodes up to date before the leaves are copied
   const Eigen::Array3d lo = W_last_origin_.array() - config_.max_extent_m;
   const Eigen::Array3d hi = W_last_origin_.array() + config_.max_extent_m;
   auto inside = [&](const octomap::OcTree::leaf_iterator& it) {
@@ -108,7 +118,7 @@ size_t MapAccumulator::prune() {
 
 std::vector<std::string> MapAccumulator::save(const std::string& directory, const std::string& base_name) const {
   std::vector<std::string> paths = {directory + "/" + base_name + ".bt", directory + "/" + base_name + ".ot"};
-  for (const auto& p : paths) writeOcTree(*tree_, p);
+  for (const auto& p : paths) writeOcTree(tree(), p);
   return paths;
 }
 
