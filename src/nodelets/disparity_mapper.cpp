@@ -51,6 +51,11 @@ class DisparityMapper : public nodelet::Nodelet {
   void reconfigure(DisparityMapperConfig& config, uint32_t level);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
 
+  /// Counts an arriving image; returns the latest camera_info (may be null).
+  sensor_msgs::CameraInfoConstPtr noteImage();
+  /// Counts and logs (throttled) an image refused for @p why.
+  void refuse(const char* what, const std::string& why);
+
   /// Draws one image (CV_32FC1 disparity) and publishes the update.
   void process(const cv::Mat& disparity, const std_msgs::Header& header, const StereoCameraConfig& camera);
 
@@ -216,20 +221,25 @@ void DisparityMapper::transformFailure(const boost::shared_ptr<const M>& msg, tf
                         msg->header.stamp.toSec(), what, params_.world_frame.c_str());
 }
 
-void DisparityMapper::disparityCallback(const stereo_msgs::DisparityImageConstPtr& msg) {
+sensor_msgs::CameraInfoConstPtr DisparityMapper::noteImage() {
   input_rate_->tick();
-  sensor_msgs::CameraInfoConstPtr info;
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++images_received_;
+  return camera_info_;
+}
+
+void DisparityMapper::refuse(const char* what, const std::string& why) {
   {
-    std::lock_guard<std::mutex> lock(mutex_);
-    ++images_received_;
-    info = camera_info_;
-  }
-  auto refuse = [&](const std::string& why) {
     std::lock_guard<std::mutex> lock(mutex_);
     ++dropped_invalid_;
     last_problem_ = why;
-    NODELET_WARN_THROTTLE(5.0, "refused a disparity image: %s", why.c_str());
-  };
+  }
+  NODELET_WARN_THROTTLE(5.0, "refused a %s: %s", what, why.c_str());
+}
+
+void DisparityMapper::disparityCallback(const stereo_msgs::DisparityImageConstPtr& msg) {
+  const sensor_msgs::CameraInfoConstPtr info = noteImage();
+  auto refuse = [this](const std::string& why) { this->refuse("disparity image", why); };
   if (msg->image.encoding != sensor_msgs::image_encodings::TYPE_32FC1)
     return refuse("encoding '" + msg->image.encoding + "', expected 32FC1");
   if (static_cast<uint64_t>(msg->image.width) * msg->image.height > static_cast<uint64_t>(params_.max_image_pixels))
@@ -252,19 +262,8 @@ void DisparityMapper::disparityCallback(const stereo_msgs::DisparityImageConstPt
 }
 
 void DisparityMapper::depthCallback(const sensor_msgs::ImageConstPtr& msg) {
-  input_rate_->tick();
-  sensor_msgs::CameraInfoConstPtr info;
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    ++images_received_;
-    info = camera_info_;
-  }
-  auto refuse = [&](const std::string& why) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    ++dropped_invalid_;
-    last_problem_ = why;
-    NODELET_WARN_THROTTLE(5.0, "refused a depth image: %s", why.c_str());
-  };
+  const sensor_msgs::CameraInfoConstPtr info = noteImage();
+  auto refuse = [this](const std::string& why) { this->refuse("depth image", why); };
   if (!info) return refuse("no camera_info received yet");
   if (info->width != msg->width || info->height != msg->height) return refuse("camera_info size differs");
   if (static_cast<uint64_t>(msg->width) * msg->height > static_cast<uint64_t>(params_.max_image_pixels))

@@ -74,6 +74,23 @@ bool poseFromTransform(const geometry_msgs::TransformStamped& transform, Eigen::
   return true;
 }
 
+geometry_msgs::TransformStamped toTransformMsg(const Eigen::Isometry3d& T, const ros::Time& stamp,
+                                               const std::string& parent, const std::string& child) {
+  geometry_msgs::TransformStamped t;
+  t.header.stamp = stamp;
+  t.header.frame_id = parent;
+  t.child_frame_id = child;
+  const Eigen::Quaterniond q(T.linear());
+  t.transform.translation.x = T.translation().x();
+  t.transform.translation.y = T.translation().y();
+  t.transform.translation.z = T.translation().z();
+  t.transform.rotation.x = q.x();
+  t.transform.rotation.y = q.y();
+  t.transform.rotation.z = q.z();
+  t.transform.rotation.w = q.w();
+  return t;
+}
+
 void toMsg(const GridUpdate& update, const std_msgs::Header& header, OccupancyUpdate* msg) {
   msg->header = header;
   msg->sensor_origin.x = update.W_sensor_origin.x();

@@ -19,27 +19,11 @@
 #include <string>
 
 #include "stereo_occupancy/flight_simulation.h"
+#include "stereo_occupancy/ros/conversions.h"
 
 namespace so = stereo_occupancy;
 
 namespace {
-
-geometry_msgs::TransformStamped toTransform(const Eigen::Isometry3d& T, const ros::Time& stamp,
-                                            const std::string& parent, const std::string& child) {
-  geometry_msgs::TransformStamped t;
-  t.header.stamp = stamp;
-  t.header.frame_id = parent;
-  t.child_frame_id = child;
-  const Eigen::Quaterniond q(T.linear());
-  t.transform.translation.x = T.translation().x();
-  t.transform.translation.y = T.translation().y();
-  t.transform.translation.z = T.translation().z();
-  t.transform.rotation.x = q.x();
-  t.transform.rotation.y = q.y();
-  t.transform.rotation.z = q.z();
-  t.transform.rotation.w = q.w();
-  return t;
-}
 
 int usage(int code) {
   std::cerr << "usage: simulate_flight --scenario posts|houses --output FILE.bag [--seed N] [--frames N]"
@@ -89,8 +73,8 @@ int main(int argc, char** argv) {
     for (size_t i = 0; i < n; ++i) {
       const ros::Time stamp = start + ros::Duration(i / s.frame_rate_hz);
       tf2_msgs::TFMessage tf;
-      tf.transforms.push_back(toTransform(s.T_W_B[i], stamp, "map", "base_link"));
-      tf.transforms.push_back(toTransform(s.T_B_C, stamp, "base_link", "camera_optical"));
+      tf.transforms.push_back(so::toTransformMsg(s.T_W_B[i], stamp, "map", "base_link"));
+      tf.transforms.push_back(so::toTransformMsg(s.T_B_C, stamp, "base_link", "camera_optical"));
       bag.write("/tf", stamp, tf);
 
       const cv::Mat d = so::renderStereoFrame(s, i, seed);

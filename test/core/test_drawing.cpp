@@ -67,6 +67,15 @@ std::set<Key> occupiedCells(const LocalGrid& g) {
   return out;
 }
 
+/// A LineDrawer for the paper's camera and 0.25 m cells.
+struct LineDrawing {
+  StereoCameraModel cam{StereoCameraConfig()};
+  InverseSensorModel model{InverseSensorModelConfig()};
+  LogOddsTable table{model, 0.25};
+  PyramidLevelTable levels{cam, 0.25};
+  LineDrawer drawer{cam, table, levels};
+};
+
 }  // namespace
 
 // A fronto-parallel wall 10 m in front fills the image (constant disparity
@@ -221,12 +230,11 @@ TEST(Drawing, InvalidPixelsChangeNothing) {
 
 // Where lines overlap the larger value stays, whatever the order (V-A, 2b).
 TEST(Drawing, ObstaclePriority) {
-  StereoCameraConfig cam_cfg;
-  const StereoCameraModel cam(cam_cfg);
-  const InverseSensorModel model{InverseSensorModelConfig()};
-  const LogOddsTable table(model, 0.25);
-  const PyramidLevelTable levels(cam, 0.25);
-  const LineDrawer drawer(cam, table, levels);
+  const LineDrawing setup;
+  const StereoCameraModel& cam = setup.cam;
+  const InverseSensorModel& model = setup.model;
+  const LogOddsTable& table = setup.table;
+  const LineDrawer& drawer = setup.drawer;
   const Eigen::Vector3d origin(0.1, 0.1, 0.1), dir = Eigen::Vector3d(1, 0.2, 0.1).normalized();
   const RangeProfile obstacle = table.profile(8.0f, static_cast<float>(cam.depthUncertainty(8.0)));
   const RangeProfile free_ray = table.freeProfile();
@@ -249,12 +257,11 @@ TEST(Drawing, ObstaclePriority) {
 // centre plane along the major axis (the fast runs of drawRay agree with the
 // table's plain look-up).
 TEST(Drawing, LineCellsCarryTheModelValue) {
-  StereoCameraConfig cam_cfg;
-  const StereoCameraModel cam(cam_cfg);
-  const InverseSensorModel model{InverseSensorModelConfig()};
-  const LogOddsTable table(model, 0.25);
-  const PyramidLevelTable levels(cam, 0.25);
-  const LineDrawer drawer(cam, table, levels);
+  const LineDrawing setup;
+  const StereoCameraModel& cam = setup.cam;
+  const InverseSensorModel& model = setup.model;
+  const LogOddsTable& table = setup.table;
+  const LineDrawer& drawer = setup.drawer;
   std::mt19937 rng(21);
   std::uniform_real_distribution<double> u(-1.0, 1.0), range(2.0, 24.0);
   for (int trial = 0; trial < 40; ++trial) {
@@ -292,12 +299,11 @@ TEST(Drawing, LineCellsCarryTheModelValue) {
 
 // A line leaving the grid writes only the cells inside it.
 TEST(Drawing, LineLeavingTheGridSkipsOutsideCells) {
-  StereoCameraConfig cam_cfg;
-  const StereoCameraModel cam(cam_cfg);
-  const InverseSensorModel model{InverseSensorModelConfig()};
-  const LogOddsTable table(model, 0.25);
-  const PyramidLevelTable levels(cam, 0.25);
-  const LineDrawer drawer(cam, table, levels);
+  const LineDrawing setup;
+  const StereoCameraModel& cam = setup.cam;
+  const InverseSensorModel& model = setup.model;
+  const LogOddsTable& table = setup.table;
+  const LineDrawer& drawer = setup.drawer;
   LocalGrid grid;
   grid.reset(Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(10, 10, 10), 0.25);  // 2.5 m
   // The obstacle lies 8 m out, far outside the grid.

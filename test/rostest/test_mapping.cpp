@@ -64,21 +64,7 @@ class MappingTest : public ::testing::Test {
   void sendFrame(const ros::Time& stamp, const std::string& frame = "camera_optical", bool with_tf = true,
                  const cv::Mat* disparity = nullptr) {
     const cv::Mat& image = disparity ? *disparity : image_;
-    if (with_tf) {
-      geometry_msgs::TransformStamped t;
-      t.header.stamp = stamp;
-      t.header.frame_id = "map";
-      t.child_frame_id = frame;
-      const Eigen::Quaterniond q(T_W_C_.linear());
-      t.transform.translation.x = T_W_C_.translation().x();
-      t.transform.translation.y = T_W_C_.translation().y();
-      t.transform.translation.z = T_W_C_.translation().z();
-      t.transform.rotation.x = q.x();
-      t.transform.rotation.y = q.y();
-      t.transform.rotation.z = q.z();
-      t.transform.rotation.w = q.w();
-      tf_.sendTransform(t);
-    }
+    if (with_tf) tf_.sendTransform(toTransformMsg(T_W_C_, stamp, "map", frame));
     auto msg = boost::make_shared<stereo_msgs::DisparityImage>();
     msg->header.stamp = stamp;
     msg->header.frame_id = frame;

@@ -37,6 +37,10 @@ bool cameraFromDepthInfo(const sensor_msgs::CameraInfo& info, const DisparityMap
 /// if it is not finite or its quaternion is not of unit norm (±1e-3).
 bool poseFromTransform(const geometry_msgs::TransformStamped& transform, Eigen::Isometry3d* T_W_C);
 
+/// A tf2 transform message of the pose T (child frame in the parent frame).
+geometry_msgs::TransformStamped toTransformMsg(const Eigen::Isometry3d& T, const ros::Time& stamp,
+                                               const std::string& parent, const std::string& child);
+
 void toMsg(const GridUpdate& update, const std_msgs::Header& header, OccupancyUpdate* msg);
 /// False (with the reason) if the message's sizes or values do not fit together.
 bool fromMsg(const OccupancyUpdate& msg, GridUpdate* update, std::string* why);
