@@ -11,7 +11,17 @@ export PATH="/usr/bin:$PATH"
 cd "$ws"
 rm -rf build/test_results
 catkin_make run_tests -j"$(nproc)"
+results="$ws/build/test_results/stereo_occupancy"
+
+# The core's gtests again under AddressSanitizer + UndefinedBehaviorSanitizer,
+# and a short libFuzzer run over the core's entry point.
 set +e
+RESULTS="$results" "$repo/scripts/sanitize.sh" > "$ws/build/sanitize.log" 2>&1
+sanitize_status=$?
+[ $sanitize_status = 0 ] || { echo "sanitized core tests FAILED:"; tail -40 "$ws/build/sanitize.log"; }
+RESULTS="$results" "$repo/scripts/fuzz.sh" "${FUZZ_SECONDS:-60}"
+fuzz_status=$?
+
 summary="$(catkin_test_results build/test_results --verbose)"
 status=$?
 set -e
@@ -19,5 +29,6 @@ echo "$summary"
 # One plain closing line, counted from the JUnit files: "N passed, N failed".
 cases=$(cat build/test_results/*/*.xml | grep -o '<testcase ' | wc -l || true)
 failed=$(cat build/test_results/*/*.xml | grep -oE '<(failure|error)[ >]' | wc -l || true)
+[ $sanitize_status = 0 ] || failed=$((failed + 1))  # an abort may leave no JUnit file
 echo "tests: $((cases - failed)) passed, $failed failed"
-exit $status
+[ $status = 0 ] && [ $sanitize_status = 0 ] && [ $fuzz_status = 0 ]

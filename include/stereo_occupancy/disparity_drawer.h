@@ -38,6 +38,9 @@ struct DrawingConfig {
   double resolution_m = 0.25;  ///< c, grid cell size [m]
   InverseSensorModelConfig sensor_model;
   BlurConfig blur;
+  /// Largest local grid drawn into (a frustum box of more cells is refused,
+  /// so that a fine resolution with a long range cannot exhaust memory).
+  size_t max_grid_cells = 64u << 20;  // 256 MiB of log-odds
 
   bool isValid(std::string* why = nullptr) const;
 };
@@ -65,6 +68,7 @@ class DisparityDrawer {
   DrawStatistics draw(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C, LocalGrid* grid);
 
   /// Shapes @p grid to the frustum's bounding box (padded for the blur) and clears it.
+  /// @throws std::invalid_argument if the box has more than max_grid_cells cells.
   void prepareGrid(const Eigen::Isometry3d& T_W_C, LocalGrid* grid) const;
 
   /// Draws into a grid that prepareGrid() shaped for the same pose.

@@ -46,6 +46,10 @@ bool DrawingConfig::isValid(std::string* why) const {
     if (why) *why = "resolution_m must be in [0.01, 10]";
     return false;
   }
+  if (max_grid_cells < 1) {
+    if (why) *why = "max_grid_cells must be >= 1";
+    return false;
+  }
   return sensor_model.isValid(why) && blur.isValid(why);
 }
 
@@ -76,7 +80,16 @@ void DisparityDrawer::prepareGrid(const Eigen::Isometry3d& T_W_C, LocalGrid* gri
   // One cell of padding keeps every line strictly inside the grid (the fast
   // path of LineDrawer::drawRay); the blur needs room for its kernels.
   const int padding = 1 + blur_.paddingCells(camera_.config().max_range_m, config_.resolution_m);
-  fitGridToBox(frustumBoundingBox(camera_, T_W_C), config_.resolution_m, padding, grid);
+  const Eigen::AlignedBox3d box = frustumBoundingBox(camera_, T_W_C);
+  // Global cell indices are ints (and OctoMap keys 16 bits): refuse poses
+  // whose cells could not even be numbered.
+  if ((box.min().array().abs().max(box.max().array().abs()) / config_.resolution_m > 1e9).any())
+    throw std::invalid_argument("camera position too far from the world origin for this resolution");
+  const Eigen::Array3d cells = (box.sizes() / config_.resolution_m).array() + 2.0 * padding + 2.0;
+  if (!(cells.prod() <= static_cast<double>(config_.max_grid_cells)))
+    throw std::invalid_argument("the frustum's grid would have " + std::to_string(static_cast<uint64_t>(cells.prod())) +
+                                " cells, more than max_grid_cells = " + std::to_string(config_.max_grid_cells));
+  fitGridToBox(box, config_.resolution_m, padding, grid);
 }
 
 DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C,

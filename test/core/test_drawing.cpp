@@ -395,6 +395,12 @@ TEST(Drawing, RejectsBadInput) {
   DrawingConfig c = config(DrawingAlgorithm::kLine);
   c.resolution_m = 0.0;
   EXPECT_THROW(DisparityDrawer(cam_cfg, c), std::invalid_argument);
+  // A fine grid over a long range is refused before it is allocated.
+  StereoCameraConfig far_cam = cam_cfg;
+  far_cam.max_range_m = 200.0;
+  DrawingConfig fine = config(DrawingAlgorithm::kLinePyramid, 0.01);
+  DisparityDrawer huge(far_cam, fine);
+  EXPECT_THROW(huge.draw(cv::Mat(480, 640, CV_32FC1, cv::Scalar(0)), T, &grid), std::invalid_argument);
   DrawingAlgorithm parsed;
   EXPECT_TRUE(parseDrawingAlgorithm("raytrace_pyramid", &parsed));
   EXPECT_EQ(parsed, DrawingAlgorithm::kRayTracePyramid);
