@@ -51,7 +51,11 @@ class DisparityMapper : public nodelet::Nodelet {
   void reconfigure(DisparityMapperConfig& config, uint32_t level);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
 
-  /// Counts an arriving image; returns the latest camera_info (may be null).
+  /// Every image as it arrives, before it waits for its pose: notices time
+  /// going backwards (a looping bag) and clears the poses of the old time line.
+  template <class M>
+  void arrival(const boost::shared_ptr<const M>& msg);
+  /// Counts an image that has its pose; returns the latest camera_info (may be null).
   sensor_msgs::CameraInfoConstPtr noteImage();
   /// Counts and logs (throttled) an image refused for @p why.
   void refuse(const char* what, const std::string& why);
@@ -72,6 +76,8 @@ class DisparityMapper : public nodelet::Nodelet {
   double last_processing_ms_ = 0.0, max_processing_ms_ = 0.0;
   std::vector<double> processing_ms_;  ///< per image, for the summary at shutdown (bounded)
   std::string last_problem_;
+  ros::Time last_image_stamp_;
+  uint64_t time_jumps_back_ = 0;
 
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
@@ -120,6 +126,7 @@ void DisparityMapper::onInit() {
     depth_filter_ = std::make_unique<tf2_ros::MessageFilter<sensor_msgs::Image>>(
         depth_sub_, *tf_buffer_, params_.world_frame, params_.queue_size, nh);
     depth_filter_->registerCallback(boost::bind(&DisparityMapper::depthCallback, this, _1));
+    depth_sub_.registerCallback(boost::bind(&DisparityMapper::arrival<sensor_msgs::Image>, this, _1));
     depth_filter_->registerFailureCallback(
         boost::bind(&DisparityMapper::transformFailure<sensor_msgs::Image>, this, _1, _2));
     camera_info_sub_ = nh.subscribe("camera_info", 1, &DisparityMapper::cameraInfoCallback, this);
@@ -128,6 +135,7 @@ void DisparityMapper::onInit() {
     disparity_filter_ = std::make_unique<tf2_ros::MessageFilter<stereo_msgs::DisparityImage>>(
         disparity_sub_, *tf_buffer_, params_.world_frame, params_.queue_size, nh);
     disparity_filter_->registerCallback(boost::bind(&DisparityMapper::disparityCallback, this, _1));
+    disparity_sub_.registerCallback(boost::bind(&DisparityMapper::arrival<stereo_msgs::DisparityImage>, this, _1));
     disparity_filter_->registerFailureCallback(
         boost::bind(&DisparityMapper::transformFailure<stereo_msgs::DisparityImage>, this, _1, _2));
     // Optional: the principal point of the rectified left camera.
@@ -219,6 +227,23 @@ void DisparityMapper::transformFailure(const boost::shared_ptr<const M>& msg, tf
   }
   NODELET_WARN_THROTTLE(5.0, "dropped an image from '%s' at %.3f: %s (to '%s')", msg->header.frame_id.c_str(),
                         msg->header.stamp.toSec(), what, params_.world_frame.c_str());
+}
+
+template <class M>
+void DisparityMapper::arrival(const boost::shared_ptr<const M>& msg) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  // A looping bag or a restarted source: stamps jump back. The poses in the
+  // tf buffer belong to the old time line (and tf2 refuses "old" data while
+  // they are there); start over.
+  if (!last_image_stamp_.isZero() && msg->header.stamp + ros::Duration(1.0) < last_image_stamp_) {
+    ++time_jumps_back_;
+    last_problem_ = "image stamps went back";
+    NODELET_WARN("image stamps went back by %.3f s (a looping bag?): clearing the tf buffer; the accumulated map "
+                 "keeps what it has (call the accumulator's ~reset to start over)",
+                 (last_image_stamp_ - msg->header.stamp).toSec());
+    tf_buffer_->clear();
+  }
+  last_image_stamp_ = msg->header.stamp;
 }
 
 sensor_msgs::CameraInfoConstPtr DisparityMapper::noteImage() {
@@ -349,6 +374,7 @@ void DisparityMapper::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
   status.add("images processed", images_processed_);
   status.add("dropped: no transform", dropped_no_transform_);
   status.add("dropped: invalid input", dropped_invalid_);
+  status.add("time jumps back", time_jumps_back_);
   status.add("last processing time [ms]", last_processing_ms_);
   status.add("max processing time [ms]", max_processing_ms_);
 }

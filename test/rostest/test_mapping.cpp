@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 #include <ros/ros.h>
+#include <diagnostic_msgs/DiagnosticArray.h>
 #include <dynamic_reconfigure/Reconfigure.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
@@ -13,6 +14,9 @@
 #include <sys/stat.h>
 
 #include <cmath>
+#include <functional>
+#include <map>
+#include <limits>
 #include <cstring>
 #include <memory>
 #include <mutex>
@@ -63,24 +67,32 @@ class MappingTest : public ::testing::Test {
   /// Sends the camera pose on /tf (unless frame is unknown) and one disparity image at @p stamp.
   void sendFrame(const ros::Time& stamp, const std::string& frame = "camera_optical", bool with_tf = true,
                  const cv::Mat* disparity = nullptr) {
-    const cv::Mat& image = disparity ? *disparity : image_;
+    const cv::Mat image = disparity ? *disparity : cv::Mat();
     if (with_tf) tf_.sendTransform(toTransformMsg(T_W_C_, stamp, "map", frame));
+    disparity_pub_.publish(makeFrame(stamp, frame, image));
+  }
+
+  /// A well-formed disparity message of @p image (default: the wall) at @p stamp.
+  boost::shared_ptr<stereo_msgs::DisparityImage> makeFrame(const ros::Time& stamp,
+                                                            const std::string& frame = "camera_optical",
+                                                            const cv::Mat& image = cv::Mat()) {
+    const cv::Mat& img = image.empty() ? image_ : image;
     auto msg = boost::make_shared<stereo_msgs::DisparityImage>();
     msg->header.stamp = stamp;
     msg->header.frame_id = frame;
     msg->image.header = msg->header;
-    msg->image.width = image.cols;
-    msg->image.height = image.rows;
+    msg->image.width = img.cols;
+    msg->image.height = img.rows;
     msg->image.encoding = "32FC1";
-    msg->image.step = image.cols * 4;
-    msg->image.data.resize(image.total() * 4);
-    std::memcpy(msg->image.data.data(), image.data, msg->image.data.size());
+    msg->image.step = img.cols * 4;
+    msg->image.data.resize(img.total() * 4);
+    std::memcpy(msg->image.data.data(), img.data, msg->image.data.size());
     msg->f = 700.0f;
     msg->T = 0.3f;
     msg->min_disparity = 0.0f;
     msg->max_disparity = 128.0f;
     msg->delta_d = 1.0f / 16.0f;
-    disparity_pub_.publish(msg);
+    return msg;
   }
 
   bool waitFor(const std::function<bool()>& condition, double seconds) {
@@ -291,6 +303,125 @@ TEST_F(MappingTest, DepthInputReconfigureAndInvalidParameters) {
     after = updates_.back();
   }
   EXPECT_NEAR(maxLogOdds(*after), logit(0.5 + 0.05 / (dl * std::sqrt(2 * M_PI))), 0.01);
+}
+
+// Hostile input: each bad message is refused without an update, the next
+// good image is mapped, and nothing non-finite reaches an update or the map.
+TEST_F(MappingTest, BadInputIsRefusedAndTheNextImageWorks) {
+  ros::Publisher update_pub = nh_.advertise<OccupancyUpdate>("/occupancy_update", 5);
+  // Stamped a little ahead, so that a later jump back lands at "now" (with
+  // wall time an image far in the past is rightly too old for tf_timeout_s).
+  ros::Time t = ros::Time::now() + ros::Duration(3.0);
+  auto next = [&]() { return t += ros::Duration(0.05); };
+  auto nan = std::numeric_limits<float>::quiet_NaN();
+  auto inf = std::numeric_limits<float>::infinity();
+  std::vector<std::pair<std::string, std::function<void(stereo_msgs::DisparityImage&)>>> cases = {
+      {"16UC1 encoding", [](stereo_msgs::DisparityImage& m) { m.image.encoding = "16UC1"; }},
+      {"step too small", [](stereo_msgs::DisparityImage& m) { m.image.step = 100; }},
+      {"data too short", [](stereo_msgs::DisparityImage& m) { m.image.data.resize(1000); }},
+      {"empty image", [](stereo_msgs::DisparityImage& m) { m.image.width = m.image.height = 0; m.image.data.clear(); }},
+      {"zero height", [](stereo_msgs::DisparityImage& m) { m.image.height = 0; }},
+      {"f = 0", [](stereo_msgs::DisparityImage& m) { m.f = 0.0f; }},
+      {"f < 0", [](stereo_msgs::DisparityImage& m) { m.f = -700.0f; }},
+      {"T = 0", [](stereo_msgs::DisparityImage& m) { m.T = 0.0f; }},
+      {"T < 0", [](stereo_msgs::DisparityImage& m) { m.T = -0.3f; }},
+      {"f NaN", [=](stereo_msgs::DisparityImage& m) { m.f = nan; }},
+      {"T inf", [=](stereo_msgs::DisparityImage& m) { m.T = inf; }},
+      {"delta_d NaN", [=](stereo_msgs::DisparityImage& m) { m.delta_d = nan; }},
+      {"oversized image", [](stereo_msgs::DisparityImage& m) {
+         m.image.width = 5000; m.image.height = 5000; m.image.step = 20000; }},
+  };
+  for (const auto& c : cases) {
+    const ros::Time stamp = next();
+    tf_.sendTransform(toTransformMsg(T_W_C_, stamp, "map", "camera_optical"));
+    auto msg = makeFrame(stamp);
+    c.second(*msg);
+    disparity_pub_.publish(msg);
+  }
+  // Hostile pixel values are skipped, not mapped: the image still gives an update without NaN.
+  cv::Mat wild = image_.clone();
+  for (int i = 0; i < static_cast<int>(wild.total()); i += 7) {
+    const float values[] = {nan, inf, -inf, -5.0f, 1e30f, 1e-30f, 200.0f};
+    reinterpret_cast<float*>(wild.data)[i] = values[(i / 7) % 7];
+  }
+  const ros::Time wild_stamp = next();
+  sendFrame(wild_stamp, "camera_optical", true, &wild);
+  // A pose with NaN and one with a non-unit quaternion: never mapped.
+  for (int k = 0; k < 2; ++k) {
+    const ros::Time stamp = next();
+    auto pose = toTransformMsg(T_W_C_, stamp, "map", "bad_pose_" + std::to_string(k));
+    if (k == 0) pose.transform.translation.x = nan;
+    else pose.transform.rotation.w = 3.0;
+    tf_.sendTransform(pose);
+    disparity_pub_.publish(makeFrame(stamp, "bad_pose_" + std::to_string(k)));
+  }
+  const ros::Time good = next();
+  sendFrame(good);
+  ASSERT_TRUE(waitFor([&] { return !updates_.empty() && updates_.back()->header.stamp == good; }, 20.0))
+      << updates_.size() << " updates";
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ASSERT_EQ(updates_.size(), 2u) << "only the wild image and the good one are mapped";
+    EXPECT_EQ(updates_[0]->header.stamp, wild_stamp);
+    for (const auto& u : updates_)
+      for (float v : u->log_odds) ASSERT_TRUE(std::isfinite(v));
+  }
+
+  // Updates the accumulator must refuse: sizes that do not fit, another resolution, NaN.
+  OccupancyUpdate bad = *updates_.back();
+  bad.log_odds.push_back(1.0f);
+  update_pub.publish(bad);
+  bad = *updates_.back();
+  bad.resolution = 0.5;
+  update_pub.publish(bad);
+  bad = *updates_.back();
+  bad.log_odds[0] = nan;
+  update_pub.publish(bad);
+  bad = *updates_.back();
+  bad.run_start[0] = 4000000000u;
+  update_pub.publish(bad);
+  ros::WallDuration(0.5).sleep();
+
+  // Stamps going back by 3 s (a looping bag): warned, the old poses cleared,
+  // then mapping goes on.
+  const ros::Time back = ros::Time::now();
+  sendFrame(back);
+  ros::WallDuration(0.3).sleep();
+  const ros::Time after = back + ros::Duration(0.1);
+  sendFrame(after);
+  ASSERT_TRUE(waitFor([&] { return updates_.back()->header.stamp == after; }, 20.0));
+  // The mapper's diagnostics count what it refused and the jump back.
+  std::map<std::string, std::string> diag;
+  ros::Subscriber diag_sub = nh_.subscribe<diagnostic_msgs::DiagnosticArray>(
+      "/diagnostics", 10, [&](const diagnostic_msgs::DiagnosticArrayConstPtr& msg) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        for (const auto& status : msg->status)
+          if (status.name == "disparity_mapper: mapper")
+            for (const auto& kv : status.values) diag[kv.key] = kv.value;
+      });
+  ASSERT_TRUE(waitFor([&] { return diag.count("time jumps back") && diag["time jumps back"] == "1"; }, 10.0));
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    EXPECT_EQ(diag["dropped: invalid input"], "13");  // the 13 malformed messages
+    // tf2 itself refuses a NaN pose and a non-unit quaternion, so those two
+    // images wait for a pose that never comes (dropped when the queue pushes
+    // them out); no update carries their stamps (checked above).
+  }
+
+  // The manager is alive and the map holds the wall, with nothing non-finite.
+  std_srvs::Trigger save;
+  ::mkdir("/tmp/stereo_occupancy_rostest", 0755);
+  ASSERT_TRUE(ros::service::call("/octomap_accumulator/save_map", save));
+  ASSERT_TRUE(save.response.success) << save.response.message;
+  octomap::OcTree saved("/tmp/stereo_occupancy_rostest/stereo_occupancy_map.bt");
+  ASSERT_NE(saved.search(12.1, 0.1, 2.1), nullptr);
+  EXPECT_TRUE(saved.isNodeOccupied(saved.search(12.1, 0.1, 2.1)));
+  std::unique_ptr<octomap::AbstractOcTree> full(
+      octomap::AbstractOcTree::read("/tmp/stereo_occupancy_rostest/stereo_occupancy_map.ot"));
+  auto* tree = dynamic_cast<octomap::OcTree*>(full.get());
+  ASSERT_NE(tree, nullptr);
+  for (auto it = tree->begin_leafs(), end = tree->end_leafs(); it != end; ++it)
+    ASSERT_TRUE(std::isfinite(it->getLogOdds()));
 }
 
 }  // namespace
