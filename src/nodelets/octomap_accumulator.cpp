@@ -51,6 +51,8 @@ class OctomapAccumulator : public nodelet::Nodelet {
   ros::Publisher octomap_pub_, markers_pub_, cloud_pub_;
   ros::ServiceServer save_srv_, reset_srv_;
   ros::Timer publish_timer_, diagnostics_timer_;
+  ros::WallTimer save_timer_;
+  size_t updates_at_last_save_ = 0;
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
 };
 
@@ -72,6 +74,18 @@ void OctomapAccumulator::onInit() {
   save_srv_ = pnh.advertiseService("save_map", &OctomapAccumulator::saveMap, this);
   reset_srv_ = pnh.advertiseService("reset", &OctomapAccumulator::reset, this);
   publish_timer_ = nh.createTimer(ros::Duration(1.0 / params_.publish_rate_hz), &OctomapAccumulator::publish, this);
+  if (params_.save_period_s > 0.0 && !params_.save_dir.empty()) {
+    // Periodic saves, so that a crash loses at most save_period_s of mapping.
+    save_timer_ = nh.createWallTimer(ros::WallDuration(params_.save_period_s), [this](const ros::WallTimerEvent&) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (map_->updates() == updates_at_last_save_) return;
+      try {
+        save();
+      } catch (const std::exception& e) {
+        NODELET_ERROR_THROTTLE(60.0, "periodic save failed: %s", e.what());
+      }
+    });
+  }
 
   diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
   diagnostics_->setHardwareID("stereo_occupancy");
@@ -150,7 +164,11 @@ void OctomapAccumulator::publish(const ros::TimerEvent&) {
   }
 }
 
-std::vector<std::string> OctomapAccumulator::save() { return map_->save(params_.save_dir, params_.map_name); }
+std::vector<std::string> OctomapAccumulator::save() {
+  auto paths = map_->save(params_.save_dir, params_.map_name);
+  updates_at_last_save_ = map_->updates();
+  return paths;
+}
 
 bool OctomapAccumulator::saveMap(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response) {
   if (params_.save_dir.empty()) {

@@ -36,6 +36,7 @@ bool OctomapAccumulatorParameters::isValid(std::string* why) const {
   if (!(std::isfinite(publish_rate_hz) && publish_rate_hz > 0.0 && publish_rate_hz <= 100.0))
     return fail(why, "publish_rate_hz must be in (0, 100]");
   if (!(std::isfinite(prune_period_s) && prune_period_s > 0.0)) return fail(why, "prune_period_s must be > 0");
+  if (!(std::isfinite(save_period_s) && save_period_s >= 0.0)) return fail(why, "save_period_s must be >= 0");
   if (map_name.empty() || map_name.find('/') != std::string::npos)
     return fail(why, "map_name must be a file name without '/'");
   return map.isValid(why);
@@ -84,6 +85,7 @@ bool readParameters(Read&& read, OctomapAccumulatorParameters* p, std::string* w
   read("prune_period_s", p->prune_period_s);
   read("save_dir", p->save_dir);
   read("map_name", p->map_name);
+  read("save_period_s", p->save_period_s);
   return p->isValid(why);
 }
 

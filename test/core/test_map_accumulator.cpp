@@ -2,9 +2,15 @@
 
 #include <octomap/OcTree.h>
 
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <thread>
 
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/grid_update.h"
@@ -129,6 +135,55 @@ TEST(MapAccumulator, SavedFilesReadBackAndReplaceAtomically) {
   ASSERT_NE(post, nullptr);
   EXPECT_TRUE(bt.isNodeOccupied(post));
   EXPECT_THROW(map.save("/nonexistent_dir_for_test", "m"), std::runtime_error);
+  std::remove(paths[0].c_str());
+  std::remove(paths[1].c_str());
+}
+
+// A kill -9 in the middle of saving leaves the previous file whole: each save
+// writes a temporary file and renames it into place.
+TEST(MapAccumulator, KillDuringSaveLeavesThePreviousMapIntact) {
+  MapAccumulator map(MapAccumulatorConfig{});
+  StereoCameraConfig camera;
+  Eigen::Isometry3d T;
+  const cv::Mat image = table1Image(StereoCameraModel(camera), &T);
+  DrawingConfig drawing;
+  drawing.algorithm = DrawingAlgorithm::kLine;  // a dense map: saves take a while
+  DisparityDrawer drawer(camera, drawing);
+  LocalGrid grid;
+  drawer.draw(image, T, &grid);
+  GridUpdate update;
+  encodeGridUpdate(grid, T.translation(), &update);
+  ASSERT_TRUE(map.integrate(update));
+  const std::string dir = ::testing::TempDir();
+  const auto paths = map.save(dir, "kill_map");  // the previous, complete files
+  const size_t leaves = map.tree().getNumLeafNodes();
+  const size_t leaves_bt = octomap::OcTree(paths[0]).getNumLeafNodes();  // .bt is pruned to occupied/free
+
+  int killed_mid_write = 0;
+  for (int trial = 0; trial < 5; ++trial) {
+    const pid_t child = fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+      for (;;) map.save(dir, "kill_map");  // saves until killed
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20 + 37 * trial));
+    ASSERT_EQ(kill(child, SIGKILL), 0);
+    int status = 0;
+    ASSERT_EQ(waitpid(child, &status, 0), child);
+    ASSERT_TRUE(WIFSIGNALED(status));
+    octomap::OcTree bt(paths[0]);
+    EXPECT_EQ(bt.getNumLeafNodes(), leaves_bt) << "trial " << trial;
+    std::unique_ptr<octomap::AbstractOcTree> ot(octomap::AbstractOcTree::read(paths[1]));
+    auto* full = dynamic_cast<octomap::OcTree*>(ot.get());
+    ASSERT_NE(full, nullptr) << "trial " << trial;
+    EXPECT_EQ(full->getNumLeafNodes(), leaves) << "trial " << trial;
+    for (const auto& p : paths) {  // the killed save's temporary file, if it was writing
+      const std::string tmp = p + ".tmp" + std::to_string(child);
+      killed_mid_write += access(tmp.c_str(), F_OK) == 0;
+      std::remove(tmp.c_str());
+    }
+  }
+  EXPECT_GT(killed_mid_write, 0) << "no kill landed during a write: the test proved nothing";
   std::remove(paths[0].c_str());
   std::remove(paths[1].c_str());
 }

@@ -39,6 +39,7 @@ struct OctomapAccumulatorParameters {
   double prune_period_s = 5.0;   ///< how often cells beyond max_extent_m are dropped [s]
   std::string save_dir;          ///< where ~save_map writes (and the map is saved on shutdown); empty: nowhere
   std::string map_name = "stereo_occupancy_map";  ///< file base name in save_dir
+  double save_period_s = 0.0;    ///< also save every this many seconds when the map changed; 0: only on request/shutdown
 
   bool isValid(std::string* why) const;
 };
