@@ -29,6 +29,21 @@ GridUpdate singleCell(const Eigen::Vector3i& g, float value, double res = 0.25) 
   return u;
 }
 double logit(double p) { return std::log(p / (1.0 - p)); }
+
+/// Integrates the Table I image, drawn with @p algorithm, into @p map.
+void integrateTable1Image(DrawingAlgorithm algorithm, MapAccumulator* map) {
+  StereoCameraConfig camera;
+  Eigen::Isometry3d T;
+  const cv::Mat image = table1Image(StereoCameraModel(camera), &T);
+  DrawingConfig drawing;
+  drawing.algorithm = algorithm;
+  DisparityDrawer drawer(camera, drawing);
+  LocalGrid grid;
+  drawer.draw(image, T, &grid);
+  GridUpdate update;
+  encodeGridUpdate(grid, T.translation(), &update);
+  ASSERT_TRUE(map->integrate(update));
+}
 }  // namespace
 
 TEST(GridUpdate, EncodesKnownCellsAsRuns) {
@@ -110,15 +125,7 @@ TEST(MapAccumulator, PruneKeepsTheMapWithinItsExtent) {
 
 TEST(MapAccumulator, SavedFilesReadBackAndReplaceAtomically) {
   MapAccumulator map(MapAccumulatorConfig{});
-  StereoCameraConfig camera;
-  Eigen::Isometry3d T;
-  const cv::Mat image = table1Image(StereoCameraModel(camera), &T);
-  DisparityDrawer drawer(camera, DrawingConfig());
-  LocalGrid grid;
-  drawer.draw(image, T, &grid);
-  GridUpdate update;
-  encodeGridUpdate(grid, T.translation(), &update);
-  ASSERT_TRUE(map.integrate(update));
+  integrateTable1Image(DrawingAlgorithm::kLinePyramid, &map);
   const std::string dir = ::testing::TempDir();
   {
     std::ofstream old(dir + "/acc_map.bt");
@@ -143,17 +150,7 @@ TEST(MapAccumulator, SavedFilesReadBackAndReplaceAtomically) {
 // writes a temporary file and renames it into place.
 TEST(MapAccumulator, KillDuringSaveLeavesThePreviousMapIntact) {
   MapAccumulator map(MapAccumulatorConfig{});
-  StereoCameraConfig camera;
-  Eigen::Isometry3d T;
-  const cv::Mat image = table1Image(StereoCameraModel(camera), &T);
-  DrawingConfig drawing;
-  drawing.algorithm = DrawingAlgorithm::kLine;  // a dense map: saves take a while
-  DisparityDrawer drawer(camera, drawing);
-  LocalGrid grid;
-  drawer.draw(image, T, &grid);
-  GridUpdate update;
-  encodeGridUpdate(grid, T.translation(), &update);
-  ASSERT_TRUE(map.integrate(update));
+  integrateTable1Image(DrawingAlgorithm::kLine, &map);  // a dense map: saves take a while
   const std::string dir = ::testing::TempDir();
   const auto paths = map.save(dir, "kill_map");  // the previous, complete files
   const size_t leaves = map.tree().getNumLeafNodes();
