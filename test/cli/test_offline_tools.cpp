@@ -87,6 +87,16 @@ TEST(OfflineTools, SimulateMapAndScoreAFlight) {
   EXPECT_LT(jsonNumber(score.out, "surface_called_free_fraction"), 0.01) << score.out;
   EXPECT_GT(jsonNumber(score.out, "free_coverage"), 0.3) << score.out;
 
+  // The depth path: the bag's exact depth images with the left camera_info.
+  const Result from_depth = run(std::string(BAG_TO_MAP_EXE) + " --bag " + bag + " --output " + dir +
+                                "offline_depth --depth-topic /ground_truth/depth --camera-info-topic "
+                                "/stereo/left/camera_info --param depth_baseline_m=0.3");
+  ASSERT_EQ(from_depth.status, 0) << from_depth.out;
+  EXPECT_EQ(jsonNumber(from_depth.out, "mapped"), 30);
+  octomap::OcTree depth_map(dir + "offline_depth.bt");
+  ASSERT_NE(depth_map.search(14.9, 3.4, 4.1), nullptr);
+  EXPECT_TRUE(depth_map.isNodeOccupied(depth_map.search(14.9, 3.4, 4.1)));
+
   // Options as in the config: another algorithm, and bad names refused.
   const Result raytrace = run(std::string(BAG_TO_MAP_EXE) + " --bag " + bag + " --output " + dir +
                               "offline_rt --param algorithm=raytrace_pyramid --param resolution_m=0.5");
@@ -97,6 +107,6 @@ TEST(OfflineTools, SimulateMapAndScoreAFlight) {
   ASSERT_TRUE(WIFEXITED(bad.status));
   EXPECT_EQ(WEXITSTATUS(bad.status), 2);
   for (const char* f : {"offline_posts.bag", "offline_posts.bag.scene.txt", "offline_posts.bt", "offline_posts.ot",
-                        "offline_rt.bt", "offline_rt.ot"})
+                        "offline_rt.bt", "offline_rt.ot", "offline_depth.bt", "offline_depth.ot"})
     std::remove((dir + f).c_str());
 }
