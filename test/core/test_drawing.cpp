@@ -68,7 +68,8 @@ std::set<Key> occupiedCells(const LocalGrid& g) {
 }
 
 /// A LineDrawer for the paper's camera and 0.25 m cells.
-struct LineDrawing {
+class LineDrawing : public ::testing::Test {
+ protected:
   StereoCameraModel cam{StereoCameraConfig()};
   InverseSensorModel model{InverseSensorModelConfig()};
   LogOddsTable table{model, 0.25};
@@ -229,12 +230,7 @@ TEST(Drawing, InvalidPixelsChangeNothing) {
 }
 
 // Where lines overlap the larger value stays, whatever the order (V-A, 2b).
-TEST(Drawing, ObstaclePriority) {
-  const LineDrawing setup;
-  const StereoCameraModel& cam = setup.cam;
-  const InverseSensorModel& model = setup.model;
-  const LogOddsTable& table = setup.table;
-  const LineDrawer& drawer = setup.drawer;
+TEST_F(LineDrawing, ObstaclePriority) {
   const Eigen::Vector3d origin(0.1, 0.1, 0.1), dir = Eigen::Vector3d(1, 0.2, 0.1).normalized();
   const RangeProfile obstacle = table.profile(8.0f, static_cast<float>(cam.depthUncertainty(8.0)));
   const RangeProfile free_ray = table.freeProfile();
@@ -256,12 +252,7 @@ TEST(Drawing, ObstaclePriority) {
 // Every cell of a line gets L̂ at the range where the ray crosses the cell's
 // centre plane along the major axis (the fast runs of drawRay agree with the
 // table's plain look-up).
-TEST(Drawing, LineCellsCarryTheModelValue) {
-  const LineDrawing setup;
-  const StereoCameraModel& cam = setup.cam;
-  const InverseSensorModel& model = setup.model;
-  const LogOddsTable& table = setup.table;
-  const LineDrawer& drawer = setup.drawer;
+TEST_F(LineDrawing, LineCellsCarryTheModelValue) {
   std::mt19937 rng(21);
   std::uniform_real_distribution<double> u(-1.0, 1.0), range(2.0, 24.0);
   for (int trial = 0; trial < 40; ++trial) {
@@ -298,12 +289,7 @@ TEST(Drawing, LineCellsCarryTheModelValue) {
 }
 
 // A line leaving the grid writes only the cells inside it.
-TEST(Drawing, LineLeavingTheGridSkipsOutsideCells) {
-  const LineDrawing setup;
-  const StereoCameraModel& cam = setup.cam;
-  const InverseSensorModel& model = setup.model;
-  const LogOddsTable& table = setup.table;
-  const LineDrawer& drawer = setup.drawer;
+TEST_F(LineDrawing, LineLeavingTheGridSkipsOutsideCells) {
   LocalGrid grid;
   grid.reset(Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(10, 10, 10), 0.25);  // 2.5 m
   // The obstacle lies 8 m out, far outside the grid.
