@@ -6,7 +6,7 @@
 # ground truth, draws a top and a side view, and prints a summary whose last
 # line is "map: <path of the .bt file>".
 #
-#   SCENARIO=posts|houses (default posts)   SEED=1   OUT=build/demo
+#   SCENARIO=posts|houses|forest|wires (default posts)   SEED=1   OUT=build/demo
 set -euo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 ws="${WS:-$repo/build/ws}"

@@ -7,6 +7,7 @@
 #include <opencv2/core.hpp>
 
 #include <string>
+#include <vector>
 
 #include "stereo_occupancy/disparity_pyramid.h"
 #include "stereo_occupancy/draw_statistics.h"
@@ -19,17 +20,24 @@
 
 namespace stereo_occupancy {
 
-/// The four ways of drawing a disparity image (sections V and VI).
+/// The paper's four ways of drawing a disparity image (sections V and VI)
+/// and the two bounded pyramidal variants (beyond the paper).
 enum class DrawingAlgorithm {
-  kLine,             ///< "line": V-A, one line per valid pixel
-  kLinePyramid,      ///< "line_pyramid": VI-B, min-disparity pyramid
-  kRayTrace,         ///< "raytrace": V-B, one projection per cell
-  kRayTracePyramid,  ///< "raytrace_pyramid": VI-C, max-disparity pyramid
+  kLine,                    ///< "line": V-A, one line per valid pixel
+  kLinePyramid,             ///< "line_pyramid": VI-B, min-disparity pyramid
+  kRayTrace,                ///< "raytrace": V-B, one projection per cell
+  kRayTracePyramid,         ///< "raytrace_pyramid": VI-C, max-disparity pyramid
+  kLinePyramidBounded,      ///< "line_pyramid_bounded": VI-B, descending where a block mixes depths
+  kRayTracePyramidBounded,  ///< "raytrace_pyramid_bounded": VI-C over the cell's footprint, likewise
 };
 
+/// Every algorithm, the paper's four first.
+const std::vector<DrawingAlgorithm>& allDrawingAlgorithms();
 /// Name of an algorithm as used by parameters and the command line.
 const char* toString(DrawingAlgorithm algorithm);
-/// Parses "line", "line_pyramid", "raytrace" or "raytrace_pyramid".
+/// The names of all algorithms, comma-separated (for messages).
+std::string drawingAlgorithmNames();
+/// Parses a name given by toString().
 bool parseDrawingAlgorithm(const std::string& name, DrawingAlgorithm* algorithm);
 
 /// Everything about drawing that is not the camera.
@@ -77,7 +85,8 @@ class DisparityDrawer {
   /// Eq. 17 blur around the camera centre; a no-op when the blur is off.
   void blur(const Eigen::Isometry3d& T_W_C, LocalGrid* grid);
 
-  /// The pyramid built for the last pyramidal drawing (for inspection and tests).
+  /// The pyramid built for the last pyramidal drawing (for inspection and
+  /// tests): the min pyramid for line drawing, the max pyramid for ray tracing.
   const DisparityPyramid& pyramid() const { return pyramid_; }
 
  private:
@@ -90,7 +99,9 @@ class DisparityDrawer {
   PyramidLevelTable levels_;
   LineDrawer line_drawer_;
   RayTracer ray_tracer_;
+  DisparityBlockBound bound_;
   DisparityPyramid pyramid_;
+  DisparityPyramid second_pyramid_;  ///< the other pyramid of a bounded variant
   DistanceDependentBlur blur_;
 };
 

@@ -11,6 +11,7 @@
 #include <limits>
 #include <vector>
 
+#include "stereo_occupancy/inverse_sensor_model.h"
 #include "stereo_occupancy/stereo_camera_model.h"
 
 namespace stereo_occupancy {
@@ -108,6 +109,40 @@ class PyramidLevelTable {
   int min_level_;
   int top_level_;
   double cell_f_px_m_;  ///< c·f
+};
+
+/// The depth bound of the bounded pyramids (beyond the paper, see README).
+///
+/// A block whose valid disparities span [d_min, d_max] is represented
+/// faithfully by one line at d_min (or one look-up of d_max) when the nearest
+/// measurement lies where the farthest one's profile is still occupied:
+/// L̂(z_near; l_p = z_far) > 0 (eq. 11, with Δl of eq. 5 at z_far). That
+/// offset is at least half a cell and grows with Δl, so for far blocks it
+/// reaches about Δl; a nearer obstacle would be drawn free by the far line
+/// and needs its own lines. A block of sky (zero) and measurements in range
+/// never is; a block wholly beyond the range always is (drawn free to it).
+class DisparityBlockBound {
+ public:
+  DisparityBlockBound(const StereoCameraModel& camera, const InverseSensorModel& model, double cell_size_m);
+
+  /// True if one line at d_min (one look-up of d_max) stands for every
+  /// disparity in [d_min, d_max]; requires 0 <= d_min <= d_max, both valid.
+  bool isFaithful(float d_min, float d_max) const {
+    if (d_max < far_disparity_) return true;  // all sky or beyond the range: free to the range
+    return d_max <= maxNearDisparity(d_min);
+  }
+
+  /// Largest d_max for which a block with this d_min is faithful [px] (0 for sky).
+  float maxNearDisparity(float d_min) const {
+    const size_t k = static_cast<size_t>(d_min * bins_per_px_);
+    return k < max_d_max_.size() ? max_d_max_[k] : d_min + max_spread_px_;
+  }
+
+ private:
+  float far_disparity_;
+  float bins_per_px_;
+  std::vector<float> max_d_max_;  ///< per bin [k, k+1) / bins_per_px of d_min, conservative over the bin
+  float max_spread_px_;            ///< above the table (nearer than min_range): one cell's spread
 };
 
 }  // namespace stereo_occupancy

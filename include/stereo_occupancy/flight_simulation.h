@@ -45,8 +45,9 @@ struct FlightScenario {
 };
 
 /// Names of the built-in scenarios: "posts" (a flight through obstacle posts
-/// with wires between some of them) and "houses" (a flight along a street of
-/// houses).
+/// with wires between some of them), "houses" (a flight along a street of
+/// houses), "forest" (a low flight down a lane between thin trunks) and
+/// "wires" (power lines of 2 cm wires above the flight, against the sky).
 std::vector<std::string> scenarioNames();
 
 /// The named scenario; @throws std::invalid_argument for an unknown name.

@@ -8,6 +8,8 @@
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 
+#include <limits>
+
 #include "stereo_occupancy/disparity_pyramid.h"
 #include "stereo_occupancy/draw_statistics.h"
 #include "stereo_occupancy/inverse_sensor_model.h"
@@ -32,18 +34,44 @@ class LineDrawer {
   void drawPyramid(const DisparityPyramid& min_pyramid, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
                    DrawStatistics* stats) const;
 
+  /// Bounded pyramidal line drawing (beyond the paper): as drawPyramid(), but
+  /// a block is drawn at level i only if @p bound says its disparities, from
+  /// @p min_pyramid and @p max_pyramid of the same image, are represented
+  /// faithfully by one line at the block's minimum; otherwise the descent
+  /// goes on to its four children. A near obstacle in a block (a post before
+  /// a far wall, a wire against the sky) thus keeps its own lines. A block
+  /// that descends draws the free stretch its children share once (along its
+  /// centre ray, up to its nearest measurement's front and to the depth
+  /// where its level's rays are one cell apart); its children start there.
+  void drawPyramidBounded(const DisparityPyramid& min_pyramid, const DisparityPyramid& max_pyramid,
+                          const DisparityBlockBound& bound, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
+                          DrawStatistics* stats) const;
+
   /// Draws the ray from the camera centre along the unit direction W_dir with
-  /// the profile of one measurement, up to min(profile end, max range).
-  /// Returns the number of cells written; parts of the ray outside the grid
-  /// are skipped.
+  /// the profile of one measurement, over the ranges [l_begin, l_stop] up to
+  /// min(profile end, max range). Returns the number of cells written; parts
+  /// of the ray outside the grid are skipped.
   uint64_t drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vector3d& W_dir, const RangeProfile& profile,
-                   LocalGrid* grid) const;
+                   LocalGrid* grid, double l_begin = 0.0,
+                   double l_stop = std::numeric_limits<double>::infinity()) const;
 
  private:
-  /// Draws the line of pixel (x, y) at pyramid level i with disparity d.
-  uint64_t drawPixel(int level, int x, int y, float d_px, const Eigen::Isometry3d& T_W_C, LocalGrid* grid) const;
+  /// What stays fixed during one bounded descent.
+  struct BoundedDescent {
+    const DisparityPyramid& min_pyramid;
+    const DisparityPyramid& max_pyramid;
+    const DisparityBlockBound& bound;
+    const Eigen::Isometry3d& T_W_C;
+    LocalGrid* grid;
+    double cell_f_m_px;  ///< c·f: level i's rays are one cell apart at depth c·f / 2^i
+  };
+
+  /// Draws the line of pixel (x, y) at pyramid level i with disparity d, from range l_begin on.
+  uint64_t drawPixel(int level, int x, int y, float d_px, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
+                     double l_begin = 0.0) const;
   void descend(const DisparityPyramid& pyramid, int level, int x, int y, const Eigen::Isometry3d& T_W_C,
                LocalGrid* grid, DrawStatistics* stats) const;
+  void descendBounded(const BoundedDescent& b, int level, int x, int y, double l_begin, DrawStatistics* stats) const;
 
   const StereoCameraModel& camera_;
   const LogOddsTable& table_;

@@ -34,9 +34,11 @@ inline Eigen::Vector3i unpackCell(uint64_t k) {
 }
 
 /// Casts the exact rays of every @p frame_step-th frame through every
-/// @p pixel_step-th pixel (in x and y) and collects the observed cells.
+/// @p pixel_step-th pixel (in x and y) and collects the observed cells; the
+/// surface cells through every @p surface_pixel_step-th pixel instead if it
+/// is > 0 (1 finds objects thinner than @p pixel_step pixels, such as wires).
 ObservedGroundTruth observeGroundTruth(const FlightScenario& scenario, double resolution_m, double max_range_m,
-                                       int frame_step = 1, int pixel_step = 4);
+                                       int frame_step = 1, int pixel_step = 4, int surface_pixel_step = 0);
 
 /// Map quality against the truth.
 struct MapQuality {

@@ -37,6 +37,17 @@ class RayTracer {
   void drawPyramid(const DisparityPyramid& max_pyramid, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
                    DrawStatistics* stats) const;
 
+  /// Bounded pyramidal ray tracing (beyond the paper): d̂ is the maximum
+  /// over the cell's footprint (the square of side c·f/z around the
+  /// projected centre), read from the coarsest blocks that cover it and that
+  /// @p bound calls faithful; a block mixing depths (an object's silhouette
+  /// against its background or the sky) is replaced by its children inside
+  /// the footprint. Objects are thus not enlarged to the paper's 2x2 window
+  /// of level i pixels, which reaches up to twice the cell's footprint.
+  void drawPyramidBounded(const DisparityPyramid& min_pyramid, const DisparityPyramid& max_pyramid,
+                          const DisparityBlockBound& bound, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
+                          DrawStatistics* stats) const;
+
  private:
   template <typename Lookup>
   void traverse(const Eigen::Isometry3d& T_W_C, LocalGrid* grid, DrawStatistics* stats, Lookup&& lookup) const;

@@ -26,13 +26,30 @@ const char* toString(DrawingAlgorithm algorithm) {
       return "raytrace";
     case DrawingAlgorithm::kRayTracePyramid:
       return "raytrace_pyramid";
+    case DrawingAlgorithm::kLinePyramidBounded:
+      return "line_pyramid_bounded";
+    case DrawingAlgorithm::kRayTracePyramidBounded:
+      return "raytrace_pyramid_bounded";
   }
   return "?";
 }
 
+const std::vector<DrawingAlgorithm>& allDrawingAlgorithms() {
+  static const std::vector<DrawingAlgorithm> all = {
+      DrawingAlgorithm::kLine,           DrawingAlgorithm::kLinePyramid,
+      DrawingAlgorithm::kRayTrace,       DrawingAlgorithm::kRayTracePyramid,
+      DrawingAlgorithm::kLinePyramidBounded, DrawingAlgorithm::kRayTracePyramidBounded};
+  return all;
+}
+
+std::string drawingAlgorithmNames() {
+  std::string names;
+  for (DrawingAlgorithm a : allDrawingAlgorithms()) names += (names.empty() ? "" : ", ") + std::string(toString(a));
+  return names;
+}
+
 bool parseDrawingAlgorithm(const std::string& name, DrawingAlgorithm* algorithm) {
-  for (DrawingAlgorithm a : {DrawingAlgorithm::kLine, DrawingAlgorithm::kLinePyramid, DrawingAlgorithm::kRayTrace,
-                             DrawingAlgorithm::kRayTracePyramid}) {
+  for (DrawingAlgorithm a : allDrawingAlgorithms()) {
     if (name == toString(a)) {
       *algorithm = a;
       return true;
@@ -67,6 +84,7 @@ DisparityDrawer::DisparityDrawer(const StereoCameraConfig& camera, const Drawing
       levels_(camera_, config.resolution_m),
       line_drawer_(camera_, table_, levels_),
       ray_tracer_(camera_, table_, levels_),
+      bound_(camera_, model_, config.resolution_m),
       blur_(config.blur) {}
 
 void DisparityDrawer::checkInput(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C) const {
@@ -111,6 +129,16 @@ DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::
     case DrawingAlgorithm::kRayTracePyramid:
       pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel());
       ray_tracer_.drawPyramid(pyramid_, T_W_C, grid, &stats);
+      break;
+    case DrawingAlgorithm::kLinePyramidBounded:
+      pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel());
+      second_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel());
+      line_drawer_.drawPyramidBounded(pyramid_, second_pyramid_, bound_, T_W_C, grid, &stats);
+      break;
+    case DrawingAlgorithm::kRayTracePyramidBounded:
+      pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel());
+      second_pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel());
+      ray_tracer_.drawPyramidBounded(second_pyramid_, pyramid_, bound_, T_W_C, grid, &stats);
       break;
   }
   stats.different_grid_cells = grid->countKnown();

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace stereo_occupancy {
 
@@ -65,6 +66,37 @@ int PyramidLevelTable::levelForDepth(double z_m) const {
   if (!(z_m > 0.0)) return top_level_;
   const int i = std::ilogb(cell_f_px_m_ / z_m);  // eq. 13 with d = bf/z: floor(log2(c·f/z))
   return std::clamp(i, min_level_, top_level_);
+}
+
+DisparityBlockBound::DisparityBlockBound(const StereoCameraModel& camera, const InverseSensorModel& model,
+                                         double cell_size_m)
+    : far_disparity_(static_cast<float>(camera.farDisparity())), bins_per_px_(8.0f) {
+  const double bf = camera.bf();
+  // For a line at depth z_far: the largest offset u in front of it where its
+  // profile is still occupied (eq. 11 is unimodal: bisection), as a disparity.
+  auto maxNear = [&](double d_min) {
+    if (!(d_min > 0.0)) return 0.0;  // sky: free all the way
+    const double z_far = bf / d_min;
+    const double delta_l = camera.depthUncertainty(z_far);
+    auto occupied = [&](double u) { return model.logOddsHat(z_far - u, z_far, delta_l, cell_size_m) > 0.0; };
+    double lo = 0.0, hi = z_far;
+    if (occupied(hi)) return std::numeric_limits<double>::infinity();
+    for (int it = 0; it < 40; ++it) {
+      const double mid = 0.5 * (lo + hi);
+      (occupied(mid) ? lo : hi) = mid;
+    }
+    return bf / (z_far - lo);
+  };
+  const double near = camera.nearDisparity();
+  const int bins = static_cast<int>(std::ceil(near * bins_per_px_)) + 1;
+  max_d_max_.resize(bins);
+  double previous = maxNear(0.0);
+  for (int k = 0; k < bins; ++k) {
+    const double next = maxNear((k + 1) / static_cast<double>(bins_per_px_));
+    max_d_max_[k] = static_cast<float>(std::min(previous, next));  // d_min anywhere in the bin
+    previous = next;
+  }
+  max_spread_px_ = static_cast<float>(cell_size_m * near * near / bf);  // one cell at the near limit
 }
 
 }  // namespace stereo_occupancy

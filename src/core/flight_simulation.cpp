@@ -86,14 +86,72 @@ FlightScenario housesScenario() {
   return s;
 }
 
+FlightScenario forestScenario() {
+  FlightScenario s;
+  s.name = "forest";
+  s.scene.ground_height_m = 0.0;
+  // Thin trunks (0.08-0.3 m, 6-14 m tall) at random, none within 2.5 m of
+  // the flight's lane y = 0; a few are texture-less (birch bark in shade).
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> along(8.0, 110.0), across(-25.0, 25.0), width(0.08, 0.3),
+      height(6.0, 14.0), unit(0.0, 1.0);
+  for (int k = 0; k < 260; ++k) {
+    const double x = along(rng), y = across(rng), w = width(rng), h = height(rng);
+    const bool textureless = unit(rng) < 0.05;
+    if (std::abs(y) < 2.5 + w) continue;
+    s.scene.addBox({x - 0.5 * w, y - 0.5 * w, 0.0}, {x + 0.5 * w, y + 0.5 * w, h}, textureless);
+  }
+  s.camera = StereoCameraConfig();
+  s.effects.sky_unmatched_above_row = 60;
+  s.T_B_C = forwardCamera(0.1);
+  s.frame_rate_hz = 10.0;
+  // 3 m/s at 3 m altitude down the lane with a slow weave, 20 s.
+  for (int i = 0; i < 200; ++i) {
+    const double t = i / s.frame_rate_hz;
+    const double y = 0.8 * std::sin(0.5 * t);
+    const double yaw = std::atan2(0.8 * 0.5 * std::cos(0.5 * t), 3.0);
+    s.T_W_B.push_back(bodyPose({3.0 * t, y, 3.0}, yaw));
+  }
+  return s;
+}
+
+FlightScenario wiresScenario() {
+  FlightScenario s;
+  s.name = "wires";
+  s.scene.ground_height_m = 0.0;
+  // Three power lines across the flight path, each three 2 cm wires between
+  // 0.3 m masts at y = +-20 m; the wires hang at 7.5-10 m, above the
+  // helicopter, so that they are seen against the sky.
+  for (int k = 0; k < 3; ++k) {
+    const double x = 25.0 + 22.0 * k;
+    for (double y : {-20.0, 20.0}) s.scene.addBox({x - 0.15, y - 0.15, 0.0}, {x + 0.15, y + 0.15, 10.5});
+    for (int w = 0; w < 3; ++w) {
+      const double z = 7.5 + 1.0 * w + 0.5 * (k % 2);
+      s.scene.addBox({x - 0.01, -20.0, z - 0.01}, {x + 0.01, 20.0, z + 0.01});
+    }
+  }
+  s.camera = StereoCameraConfig();
+  s.effects.sky_unmatched_above_row = -1;  // all sky matched at zero disparity
+  s.T_B_C = forwardCamera(-0.08);           // pitched slightly up
+  s.frame_rate_hz = 10.0;
+  // 4 m/s at 4.5 m altitude, drifting sideways, 20 s.
+  for (int i = 0; i < 200; ++i) {
+    const double t = i / s.frame_rate_hz;
+    s.T_W_B.push_back(bodyPose({4.0 * t, 2.0 * std::sin(0.2 * t), 4.5 + 0.3 * std::sin(0.3 * t)}, 0.0));
+  }
+  return s;
+}
+
 }  // namespace
 
-std::vector<std::string> scenarioNames() { return {"posts", "houses"}; }
+std::vector<std::string> scenarioNames() { return {"posts", "houses", "forest", "wires"}; }
 
 FlightScenario makeScenario(const std::string& name) {
   if (name == "posts") return postsScenario();
   if (name == "houses") return housesScenario();
-  throw std::invalid_argument("unknown scenario '" + name + "' (posts, houses)");
+  if (name == "forest") return forestScenario();
+  if (name == "wires") return wiresScenario();
+  throw std::invalid_argument("unknown scenario '" + name + "' (posts, houses, forest, wires)");
 }
 
 namespace {

@@ -9,27 +9,29 @@ LineDrawer::LineDrawer(const StereoCameraModel& camera, const LogOddsTable& tabl
     : camera_(camera), table_(table), levels_(levels) {}
 
 uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vector3d& W_dir,
-                             const RangeProfile& profile, LocalGrid* grid) const {
+                             const RangeProfile& profile, LocalGrid* grid, double l_begin, double l_stop) const {
   const double c = grid->resolution();
   const double inv_c = 1.0 / c;
-  const double l_end = std::min<double>(profile.endRange(), camera_.config().max_range_m);
-  if (!(l_end > 0.0)) return 0;
+  const double l_end = std::min({static_cast<double>(profile.endRange()), camera_.config().max_range_m, l_stop});
+  if (!(l_end > l_begin)) return 0;
 
   // Cell units relative to the grid's lower corner. One cell per slab of the
   // major axis (a 3D Bresenham line); in each slab the cell is the one where
   // the ray crosses the slab's centre plane, and l is the ray's range there.
   const Eigen::Vector3d g0 = (W_origin - grid->originPosition()) * inv_c;
+  const double t_begin = l_begin * inv_c;
   const double t_end = l_end * inv_c;
   int m = 0;
   W_dir.cwiseAbs().maxCoeff(&m);
   const int a = (m + 1) % 3;
   const int b = (m + 2) % 3;
-  const int k0 = static_cast<int>(std::floor(g0[m]));
+  const Eigen::Vector3d g_begin = g0 + W_dir * t_begin;
+  const int k0 = static_cast<int>(std::floor(g_begin[m]));
   const int k1 = static_cast<int>(std::floor(g0[m] + W_dir[m] * t_end));
   const int step = W_dir[m] > 0.0 ? 1 : -1;
   const int n = std::abs(k1 - k0) + 1;
   const double dt = 1.0 / std::abs(W_dir[m]);
-  const double t0 = (k0 + 0.5 - g0[m]) / W_dir[m];  // |t0| <= dt / 2
+  const double t0 = (k0 + 0.5 - g0[m]) / W_dir[m];  // |t0 - t_begin| <= dt / 2
 
   const Eigen::Vector3i& size = grid->size();
   const int64_t stride[3] = {1, size.x(), static_cast<int64_t>(size.x()) * size.y()};
@@ -46,7 +48,7 @@ uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vecto
   // skipped (only possible when the grid does not cover the segment).
   uint64_t written = 0;
   auto endCell = [&](int km, double t) {
-    t = std::clamp(t, 0.0, t_end);
+    t = std::clamp(t, t_begin, t_end);
     const int ka = static_cast<int>(std::floor(g0[a] + W_dir[a] * t));
     const int kb = static_cast<int>(std::floor(g0[b] + W_dir[b] * t));
     if (km < 0 || km > nm || ka < 0 || ka > na || kb < 0 || kb > nb) return;
@@ -56,7 +58,7 @@ uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vecto
   endCell(k0, t0);
   if (n == 1) return written;
 
-  // Inner slabs 1 .. n-2: 0 < t < t_end, so their cells lie on the segment.
+  // Inner slabs 1 .. n-2: t_begin < t < t_end, so their cells lie on the segment.
   // The minor coordinates step in 32.32 fixed point: exact sums, floor by shift.
   constexpr double kOne = 4294967296.0;  // 2^32
   const float t1 = static_cast<float>(t0 + dt);
@@ -78,8 +80,8 @@ uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vecto
   // frustum), so does the segment and no index needs a check.
   const Eigen::Vector3d g_end = g0 + W_dir * t_end;
   const double margin = 1e-3;
-  const bool inside = (g0.array() >= margin).all() && (g_end.array() >= margin).all() &&
-                      (g0.array() < size.cast<double>().array() - margin).all() &&
+  const bool inside = (g_begin.array() >= margin).all() && (g_end.array() >= margin).all() &&
+                      (g_begin.array() < size.cast<double>().array() - margin).all() &&
                       (g_end.array() < size.cast<double>().array() - margin).all();
   auto cellA = [&]() { return static_cast<int64_t>(pa >> 32); };
   auto cellB = [&]() { return static_cast<int64_t>(pb >> 32); };
@@ -144,12 +146,12 @@ void LineDrawer::drawImage(const cv::Mat& disparity, const Eigen::Isometry3d& T_
   }
 }
 
-uint64_t LineDrawer::drawPixel(int level, int x, int y, float d_px, const Eigen::Isometry3d& T_W_C,
-                               LocalGrid* grid) const {
+uint64_t LineDrawer::drawPixel(int level, int x, int y, float d_px, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
+                               double l_begin) const {
   const double X = DisparityPyramid::centreOf(level, x, camera_.config().width_px);
   const double Y = DisparityPyramid::centreOf(level, y, camera_.config().height_px);
   const Eigen::Vector3d W_dir = T_W_C.linear() * camera_.rayThroughPixel(X, Y).normalized();
-  return drawRay(T_W_C.translation(), W_dir, pixelProfile(camera_, table_, X, Y, d_px), grid);
+  return drawRay(T_W_C.translation(), W_dir, pixelProfile(camera_, table_, X, Y, d_px), grid, l_begin);
 }
 
 void LineDrawer::descend(const DisparityPyramid& pyramid, int level, int x, int y, const Eigen::Isometry3d& T_W_C,
@@ -174,6 +176,60 @@ void LineDrawer::drawPyramid(const DisparityPyramid& min_pyramid, const Eigen::I
   const int top = min_pyramid.topLevel();
   for (int y = 0; y < min_pyramid.height(top); ++y)
     for (int x = 0; x < min_pyramid.width(top); ++x) descend(min_pyramid, top, x, y, T_W_C, grid, stats);
+}
+
+void LineDrawer::descendBounded(const BoundedDescent& b, int level, int x, int y, double l_begin,
+                                DrawStatistics* stats) const {
+  const float d = b.min_pyramid.at(level, x, y);
+  ++stats->used_image_pixels;
+  if (d == DisparityPyramid::kInvalidMin) return;  // the whole block is invalid
+  const bool at_bottom = level <= levels_.minLevel();
+  const bool fine_enough = levels_.levelForDisparity(d) >= level;
+  float d_max = d;
+  if (level > 0) {
+    ++stats->used_image_pixels;
+    d_max = b.max_pyramid.at(level, x, y);
+  }
+  if (at_bottom || (fine_enough && (level <= 0 || b.bound.isFaithful(d, d_max)))) {
+    ++stats->coordinate_transfers;
+    stats->grid_cells_drawn += drawPixel(level, x, y, d, b.T_W_C, b.grid, l_begin);
+    return;
+  }
+  // The block's rays lie within one cell of each other up to the depth
+  // z_i = c·f / 2^i (eq. 12) and are free up to the nearest measurement's
+  // front: one ray through the block's centre draws that stretch for all of
+  // them, its children's lines start where it ends.
+  const auto& cfg = camera_.config();
+  const double X = DisparityPyramid::centreOf(level, x, cfg.width_px);
+  const double Y = DisparityPyramid::centreOf(level, y, cfg.height_px);
+  const Eigen::Vector3d C_ray = camera_.rayThroughPixel(X, Y);
+  const double norm = C_ray.norm();
+  const RangeProfile nearest = pixelProfile(camera_, table_, X, Y, d_max);
+  const double l_shared = std::min(std::ldexp(b.cell_f_m_px, -level) * norm,
+                                   static_cast<double>(nearest.l_p_m + nearest.front_m));
+  if (l_shared > l_begin) {
+    ++stats->coordinate_transfers;
+    stats->grid_cells_drawn += drawRay(b.T_W_C.translation(), b.T_W_C.linear() * (C_ray / norm),
+                                       table_.freeProfile(), b.grid, l_begin, l_shared);
+    l_begin = l_shared;
+  }
+  const int w = b.min_pyramid.width(level - 1);
+  const int h = b.min_pyramid.height(level - 1);
+  for (int cy = 2 * y; cy <= 2 * y + 1 && cy < h; ++cy)
+    for (int cx = 2 * x; cx <= 2 * x + 1 && cx < w; ++cx) descendBounded(b, level - 1, cx, cy, l_begin, stats);
+}
+
+void LineDrawer::drawPyramidBounded(const DisparityPyramid& min_pyramid, const DisparityPyramid& max_pyramid,
+                                    const DisparityBlockBound& bound, const Eigen::Isometry3d& T_W_C,
+                                    LocalGrid* grid, DrawStatistics* stats) const {
+  CV_Assert(min_pyramid.type() == PyramidType::kMinDisparity && max_pyramid.type() == PyramidType::kMaxDisparity &&
+            min_pyramid.topLevel() == max_pyramid.topLevel());
+  stats->coordinate_transfers += 1;  // the camera centre
+  const BoundedDescent b{min_pyramid, max_pyramid, bound, T_W_C, grid,
+                         grid->resolution() * camera_.config().focal_length_px};
+  const int top = min_pyramid.topLevel();
+  for (int y = 0; y < min_pyramid.height(top); ++y)
+    for (int x = 0; x < min_pyramid.width(top); ++x) descendBounded(b, top, x, y, 0.0, stats);
 }
 
 }  // namespace stereo_occupancy

@@ -8,21 +8,28 @@
 namespace stereo_occupancy {
 
 ObservedGroundTruth observeGroundTruth(const FlightScenario& scenario, double resolution_m, double max_range_m,
-                                       int frame_step, int pixel_step) {
+                                       int frame_step, int pixel_step, int surface_pixel_step) {
   ObservedGroundTruth truth;
+  if (surface_pixel_step <= 0) surface_pixel_step = pixel_step;
   truth.resolution_m = resolution_m;
   const StereoCameraModel camera(scenario.camera);
   const double c = resolution_m;
   for (size_t f = 0; f < scenario.T_W_B.size(); f += static_cast<size_t>(frame_step)) {
     const Eigen::Isometry3d T_W_C = scenario.cameraPose(f);
-    for (int y = pixel_step / 2; y < scenario.camera.height_px; y += pixel_step) {
-      for (int x = pixel_step / 2; x < scenario.camera.width_px; x += pixel_step) {
+    for (int y = surface_pixel_step / 2; y < scenario.camera.height_px; y += surface_pixel_step) {
+      for (int x = surface_pixel_step / 2; x < scenario.camera.width_px; x += surface_pixel_step) {
         const Eigen::Vector3d W_dir = T_W_C.linear() * camera.rayThroughPixel(x, y).normalized();
         const double range = scenario.scene.castRay(T_W_C.translation(), W_dir);
         // The cell just behind the hit point holds the solid (a point on a face
         // that the ray meets from the cell's far side belongs to the cell in front).
         if (range <= max_range_m)
           truth.surface.insert(packCell(LocalGrid::globalIndex(T_W_C.translation() + (range + 1e-6) * W_dir, c)));
+      }
+    }
+    for (int y = pixel_step / 2; y < scenario.camera.height_px; y += pixel_step) {
+      for (int x = pixel_step / 2; x < scenario.camera.width_px; x += pixel_step) {
+        const Eigen::Vector3d W_dir = T_W_C.linear() * camera.rayThroughPixel(x, y).normalized();
+        const double range = scenario.scene.castRay(T_W_C.translation(), W_dir);
         const double empty_until = std::min(range - 1.5 * c, max_range_m);
         for (double l = 0.5 * c; l < empty_until; l += 0.5 * c) {
           const Eigen::Vector3d p = T_W_C.translation() + l * W_dir;

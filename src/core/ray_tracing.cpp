@@ -165,4 +165,61 @@ void RayTracer::drawPyramid(const DisparityPyramid& max_pyramid, const Eigen::Is
   });
 }
 
+void RayTracer::drawPyramidBounded(const DisparityPyramid& min_pyramid, const DisparityPyramid& max_pyramid,
+                                   const DisparityBlockBound& bound, const Eigen::Isometry3d& T_W_C,
+                                   LocalGrid* grid, DrawStatistics* stats) const {
+  CV_Assert(min_pyramid.type() == PyramidType::kMinDisparity && max_pyramid.type() == PyramidType::kMaxDisparity &&
+            min_pyramid.topLevel() == max_pyramid.topLevel());
+  const int top = max_pyramid.topLevel();
+  const double half_cell_f = 0.5 * grid->resolution() * camera_.config().focal_length_px;
+  traverse(T_W_C, grid, stats, [&](const Eigen::Vector3d& C_p, double u, double v, DrawStatistics* st) {
+    // Eq. 13's level: 2^i <= c·f/z, the footprint spans 2-3 blocks per axis.
+    const int i = std::clamp(levels_.levelForDepth(C_p.z()), 0, top);
+    // The footprint in pixel-edge coordinates: level-0 pixel k covers [k, k+1),
+    // a level-j block b covers [b·2^j, (b+1)·2^j).
+    const double r = half_cell_f / C_p.z();
+    const double x_lo = u + 0.5 - r, x_hi = u + 0.5 + r, y_lo = v + 0.5 - r, y_hi = v + 0.5 + r;
+    // Block b of level j spans [b·2^j, (b+1)·2^j); does it overlap [lo, hi)?
+    auto overlaps = [](int b, int j, double lo, double hi) {
+      return static_cast<double>(b << j) < hi && static_cast<double>((b + 1) << j) > lo;
+    };
+    auto inside = [&](int bx, int by, int j) {
+      return static_cast<double>(bx << j) >= x_lo && static_cast<double>((bx + 1) << j) <= x_hi &&
+             static_cast<double>(by << j) >= y_lo && static_cast<double>((by + 1) << j) <= y_hi;
+    };
+    // Refined at most two levels: a block of level i-2 reaches at most a
+    // quarter of the footprint's side (eq. 13) beyond it.
+    const int j_min = std::max(0, i - 2);
+    float m = DisparityPyramid::kInvalidMax;
+    // Depth-first. A block whose maximum cannot raise d̂, or that lies
+    // wholly inside the footprint, is not refined; nor is one of level j_min.
+    auto visit = [&](auto&& self, int j, int bx, int by) -> void {
+      const float hi = max_pyramid.level(j).ptr<float>(by)[bx];
+      ++st->used_image_pixels;
+      if (hi <= m) return;  // also an all-invalid block (-1)
+      if (j > j_min && !inside(bx, by, j)) {
+        ++st->used_image_pixels;
+        if (!bound.isFaithful(min_pyramid.level(j).ptr<float>(by)[bx], hi)) {
+          const int w = max_pyramid.width(j - 1), h = max_pyramid.height(j - 1);
+          for (int cy = 2 * by; cy <= 2 * by + 1 && cy < h; ++cy) {
+            if (!overlaps(cy, j - 1, y_lo, y_hi)) continue;
+            for (int cx = 2 * bx; cx <= 2 * bx + 1 && cx < w; ++cx)
+              if (overlaps(cx, j - 1, x_lo, x_hi)) self(self, j - 1, cx, cy);
+          }
+          return;
+        }
+      }
+      m = hi;
+    };
+    const double s = 1.0 / static_cast<double>(1 << i);
+    const int bx0 = std::max(0, static_cast<int>(x_lo * s));  // truncation: floor, or <= 0
+    const int by0 = std::max(0, static_cast<int>(y_lo * s));
+    const int bx1 = std::min(max_pyramid.width(i) - 1, static_cast<int>(std::ceil(x_hi * s)) - 1);
+    const int by1 = std::min(max_pyramid.height(i) - 1, static_cast<int>(std::ceil(y_hi * s)) - 1);
+    for (int by = by0; by <= by1; ++by)
+      for (int bx = bx0; bx <= bx1; ++bx) visit(visit, i, bx, by);
+    return m;
+  });
+}
+
 }  // namespace stereo_occupancy

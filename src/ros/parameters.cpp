@@ -62,8 +62,7 @@ bool readParameters(Read&& read, DisparityMapperParameters* p, std::string* why)
   std::string algorithm = toString(p->drawing.algorithm);
   read("algorithm", algorithm);
   if (!parseDrawingAlgorithm(algorithm, &p->drawing.algorithm))
-    return fail(why, "algorithm must be one of line, line_pyramid, raytrace, raytrace_pyramid (got '" + algorithm +
-                         "')");
+    return fail(why, "algorithm must be one of " + drawingAlgorithmNames() + " (got '" + algorithm + "')");
   read("resolution_m", p->drawing.resolution_m);
   read("k_m", p->drawing.sensor_model.k_m);
   read("p_min", p->drawing.sensor_model.p_min);

@@ -46,14 +46,27 @@ int main(int argc, char** argv) {
   int frame_step = 4;
   uint32_t seed = 1;
   std::vector<double> resolutions = {1.0, 0.5, 0.25};
+  bool resolution_given = false;
+  int truth_pixel_step = 4;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--scenario" && i + 1 < argc) scenario_name = argv[++i];
     else if (a == "--frame-step" && i + 1 < argc) frame_step = std::max(1, std::atoi(argv[++i]));
     else if (a == "--seed" && i + 1 < argc) seed = static_cast<uint32_t>(std::atoi(argv[++i]));
-    else if (a == "--resolution" && i + 1 < argc) resolutions = {std::atof(argv[++i])};
+    else if (a == "--truth-pixel-step" && i + 1 < argc) truth_pixel_step = std::max(1, std::atoi(argv[++i]));
+    else if (a == "--resolution" && i + 1 < argc) {  // repeatable
+      if (!resolution_given) resolutions.clear();
+      resolution_given = true;
+      resolutions.push_back(std::atof(argv[++i]));
+      if (!(resolutions.back() >= 0.01)) {
+        std::cerr << "compare_octomap: --resolution must be >= 0.01 m\n";
+        return 2;
+      }
+    }
     else {
-      std::cerr << "usage: compare_octomap [--scenario posts|houses] [--frame-step N] [--seed N] [--resolution M]\n";
+      std::cerr << "usage: compare_octomap [--scenario posts|houses|forest|wires] [--frame-step N] [--seed N]\n"
+                   "                       [--resolution M [--resolution M ...]] [--truth-pixel-step N]\n"
+                   "--truth-pixel-step: true surface cells from every N-th pixel (default 4; 1 finds wires)\n";
       return a == "--help" ? 0 : 2;
     }
   }
@@ -76,12 +89,13 @@ int main(int argc, char** argv) {
             << "), 640x480, 25 m range. One thread. Time per frame, median over the frames.\n"
             << "Ours: draw (incl. pyramid) + encode, then fusion into the OcTree (MapAccumulator). OctoMap: "
                "insertPointCloud of the valid pixels' points (zero disparity has no point), max range 25 m.\n"
-            << "Quality within one cell against the ground truth of the mapped frames.\n\n"
+            << "Quality within one cell against the ground truth of the mapped frames (surface cells from every "
+            << truth_pixel_step << ". pixel, empty cells from every 4th).\n\n"
             << "| cell | method | draw ms | fusion ms | total ms | occupied precision % | occupied recall % | "
                "surface called free % | free coverage % |\n|---|---|---:|---:|---:|---:|---:|---:|---:|\n";
 
   for (double res : resolutions) {
-    const so::ObservedGroundTruth truth = so::observeGroundTruth(truth_flight, res, max_range, 1, 4);
+    const so::ObservedGroundTruth truth = so::observeGroundTruth(truth_flight, res, max_range, 1, 4, truth_pixel_step);
     auto report = [&](const std::string& name, std::vector<double> draw, std::vector<double> fuse,
                       const octomap::OcTree& tree) {
       auto median = [](std::vector<double> v) {
@@ -97,8 +111,7 @@ int main(int argc, char** argv) {
                 << pct(q.occupiedRecall()) << " | " << pct(q.surfaceCalledFree()) << " | " << pct(q.freeCoverage())
                 << " |" << std::endl;
     };
-    for (so::DrawingAlgorithm algorithm : {so::DrawingAlgorithm::kLine, so::DrawingAlgorithm::kLinePyramid,
-                                           so::DrawingAlgorithm::kRayTrace, so::DrawingAlgorithm::kRayTracePyramid}) {
+    for (so::DrawingAlgorithm algorithm : so::allDrawingAlgorithms()) {
       so::DrawingConfig config;
       config.algorithm = algorithm;
       config.resolution_m = res;

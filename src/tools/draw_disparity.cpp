@@ -26,7 +26,8 @@ const char* kUsage =
     "usage: draw_disparity --disparity FILE [--disparity-scale S] --focal F [--cx CX --cy CY]\n"
     "                      --baseline B [--delta-d DD] [--pose \"tx ty tz qx qy qz qw\"]\n"
     "                      [--resolution M] [--max-range M]\n"
-    "                      [--algorithm line|line_pyramid|raytrace|raytrace_pyramid]\n"
+    "                      [--algorithm line|line_pyramid|raytrace|raytrace_pyramid|\n"
+    "                                   line_pyramid_bounded|raytrace_pyramid_bounded]\n"
     "                      [--blur SIGMA_TRANS_M SIGMA_ANGLE_RAD] [--repeat N] [--output FILE.ot|FILE.bt]\n"
     "Draws a disparity image (PFM float: NaN/negative invalid, 0 infinitely far; or 16-bit PNG,\n"
     "disparity = value / S) seen from the pose (optical frame in the world, p_W = q p_C + t)\n"
@@ -128,7 +129,7 @@ int run(int argc, char** argv) {
 
   so::DrawingConfig drawing;
   if (!so::parseDrawingAlgorithm(o.algorithm, &drawing.algorithm))
-    throw std::invalid_argument("--algorithm must be one of line, line_pyramid, raytrace, raytrace_pyramid");
+    throw std::invalid_argument("--algorithm must be one of " + so::drawingAlgorithmNames());
   drawing.resolution_m = o.resolution;
   drawing.blur.sigma_trans_m = o.sigma_trans;
   drawing.blur.sigma_angle_rad = o.sigma_angle;

@@ -25,7 +25,7 @@ int main(int argc, char** argv) {
     else if (a == "--views" && i + 1 < argc) views_prefix = argv[++i];
     else if (a == "--frames" && i + 1 < argc) frames = std::stol(argv[++i]);
     else {
-      std::cerr << "usage: evaluate_map --map FILE.bt|FILE.ot --scenario posts|houses [--max-range M]"
+      std::cerr << "usage: evaluate_map --map FILE.bt|FILE.ot --scenario posts|houses|forest|wires [--max-range M]"
                    " [--frames N (the flight's first N frames were mapped)]\n"
                    "                    [--views PREFIX (writes PREFIX_top.png, PREFIX_side.png)]\n";
       return a == "--help" ? 0 : 2;

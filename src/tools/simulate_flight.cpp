@@ -26,7 +26,7 @@ namespace so = stereo_occupancy;
 namespace {
 
 int usage(int code) {
-  std::cerr << "usage: simulate_flight --scenario posts|houses --output FILE.bag [--seed N] [--frames N]"
+  std::cerr << "usage: simulate_flight --scenario posts|houses|forest|wires --output FILE.bag [--seed N] [--frames N]"
                " [--true-depth]\n"
                "  --true-depth  also write each frame's exact depth (32FC1, m; inf: sky) on /ground_truth/depth\n";
   return code;

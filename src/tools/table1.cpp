@@ -48,6 +48,8 @@ int repeatsFor(so::DrawingAlgorithm a, int base) {
   switch (a) {
     case so::DrawingAlgorithm::kLinePyramid:
     case so::DrawingAlgorithm::kRayTracePyramid:
+    case so::DrawingAlgorithm::kLinePyramidBounded:
+    case so::DrawingAlgorithm::kRayTracePyramidBounded:
       return base;
     default:
       return std::max(3, base / 10);
@@ -92,8 +94,7 @@ int main(int argc, char** argv) {
             << "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
 
   for (double resolution : {1.0, 0.5, 0.25}) {
-    for (so::DrawingAlgorithm algorithm : {so::DrawingAlgorithm::kLine, so::DrawingAlgorithm::kLinePyramid,
-                                           so::DrawingAlgorithm::kRayTrace, so::DrawingAlgorithm::kRayTracePyramid}) {
+    for (so::DrawingAlgorithm algorithm : so::allDrawingAlgorithms()) {  // the paper's four, then the bounded
       so::DrawingConfig config;
       config.algorithm = algorithm;
       config.resolution_m = resolution;
@@ -118,9 +119,13 @@ int main(int argc, char** argv) {
            << ms.back() << ")";
       std::cout << "| " << resolution << " m | " << so::toString(algorithm) << " | " << grid.numCells() << " | "
                 << stats.coordinate_transfers << " | " << stats.used_image_pixels << " | " << stats.grid_cells_drawn
-                << " | " << stats.different_grid_cells << " | " << time.str() << " | " << paper->transfers << " | "
-                << paper->pixels << " | " << paper->drawn << " | " << paper->different << " | " << paper->ms
-                << " |" << std::endl;
+                << " | " << stats.different_grid_cells << " | " << time.str() << " | ";
+      if (paper) {
+        std::cout << paper->transfers << " | " << paper->pixels << " | " << paper->drawn << " | " << paper->different
+                  << " | " << paper->ms << " |" << std::endl;
+      } else {  // beyond the paper
+        std::cout << "- | - | - | - | - |" << std::endl;
+      }
     }
   }
   return 0;
