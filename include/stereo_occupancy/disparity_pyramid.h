@@ -11,6 +11,7 @@
 #include <limits>
 #include <vector>
 
+#include "stereo_occupancy/integer_math.h"
 #include "stereo_occupancy/inverse_sensor_model.h"
 #include "stereo_occupancy/stereo_camera_model.h"
 
@@ -60,9 +61,9 @@ class DisparityPyramid {
   /// along an axis with @p size0 level-0 pixels: the centre of the level-0
   /// pixels the block covers (a block at the right or bottom edge may be cut).
   static double centreOf(int i, int x, int size0) {
-    if (i <= 0) return std::ldexp(x + 0.5, i) - 0.5;
-    const double first = std::ldexp(static_cast<double>(x), i);
-    const double last = std::min(std::ldexp(static_cast<double>(x + 1), i), static_cast<double>(size0)) - 1.0;
+    if (i <= 0) return (x + 0.5) * powerOfTwo(i) - 0.5;
+    const double first = static_cast<double>(x << i);
+    const double last = static_cast<double>(std::min((x + 1) << i, size0) - 1);
     return 0.5 * (first + last);
   }
 
@@ -85,12 +86,16 @@ class PyramidLevelTable {
   /// Level for disparity d [px], clamped to [minLevel(), topLevel()].
   int levelForDisparity(float d_px) const {
     const float d = d_px > far_disparity_ ? d_px : far_disparity_;
-    const int i = std::ilogb(d * c_over_b_);  // floor(log2(c·d/b)) by the float's exponent
+    const int i = floorLog2(d * c_over_b_);  // floor(log2(c·d/b)): the float's exponent
     return i < min_level_ ? min_level_ : (i > top_level_ ? top_level_ : i);
   }
 
   /// Level for a depth z [m] (eq. 13 with d = bf/z), clamped likewise.
-  int levelForDepth(double z_m) const;
+  int levelForDepth(double z_m) const {
+    if (!(z_m > 0.0)) return top_level_;
+    const int i = floorLog2(cell_f_px_m_ / z_m);  // floor(log2(c·f/z))
+    return i < min_level_ ? min_level_ : (i > top_level_ ? top_level_ : i);
+  }
 
   /// Lowest level used: min(0, level of the maximum range); < 0 means eq. 15 enlargements.
   int minLevel() const { return min_level_; }

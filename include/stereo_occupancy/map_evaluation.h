@@ -9,6 +9,7 @@
 #include <unordered_set>
 
 #include "stereo_occupancy/flight_simulation.h"
+#include "stereo_occupancy/local_grid.h"
 
 namespace stereo_occupancy {
 
@@ -58,6 +59,15 @@ struct MapQuality {
   /// One JSON object with the counts and the four ratios.
   std::string toJson() const;
 };
+
+/// The cells holding the surface points that frame @p frame's exact image
+/// sees through every pixel within @p max_range_m, each once.
+std::vector<Eigen::Vector3i> frameSurfaceCells(const FlightScenario& scenario, size_t frame, double resolution_m,
+                                               double max_range_m);
+
+/// How many of @p cells (global indices) one frame's local grid calls free:
+/// known and below zero log-odds.
+size_t countCalledFree(const LocalGrid& grid, const std::vector<Eigen::Vector3i>& cells);
 
 /// Scores @p map (occupied: above its occupancy threshold) against the scene and the observed truth.
 MapQuality evaluateMap(const octomap::OcTree& map, const SyntheticScene& scene, const ObservedGroundTruth& truth);

@@ -62,12 +62,6 @@ PyramidLevelTable::PyramidLevelTable(const StereoCameraModel& camera, double cel
   top_level_ = std::max(0, std::min(near_level, size_limit));
 }
 
-int PyramidLevelTable::levelForDepth(double z_m) const {
-  if (!(z_m > 0.0)) return top_level_;
-  const int i = std::ilogb(cell_f_px_m_ / z_m);  // eq. 13 with d = bf/z: floor(log2(c·f/z))
-  return std::clamp(i, min_level_, top_level_);
-}
-
 DisparityBlockBound::DisparityBlockBound(const StereoCameraModel& camera, const InverseSensorModel& model,
                                          double cell_size_m)
     : far_disparity_(static_cast<float>(camera.farDisparity())), bins_per_px_(8.0f) {

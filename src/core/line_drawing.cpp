@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "stereo_occupancy/integer_math.h"
+
 namespace stereo_occupancy {
 
 LineDrawer::LineDrawer(const StereoCameraModel& camera, const LogOddsTable& table, const PyramidLevelTable& levels)
@@ -26,8 +28,8 @@ uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vecto
   const int a = (m + 1) % 3;
   const int b = (m + 2) % 3;
   const Eigen::Vector3d g_begin = g0 + W_dir * t_begin;
-  const int k0 = static_cast<int>(std::floor(g_begin[m]));
-  const int k1 = static_cast<int>(std::floor(g0[m] + W_dir[m] * t_end));
+  const int k0 = floorToInt(g_begin[m]);
+  const int k1 = floorToInt(g0[m] + W_dir[m] * t_end);
   const int step = W_dir[m] > 0.0 ? 1 : -1;
   const int n = std::abs(k1 - k0) + 1;
   const double dt = 1.0 / std::abs(W_dir[m]);
@@ -49,8 +51,8 @@ uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vecto
   uint64_t written = 0;
   auto endCell = [&](int km, double t) {
     t = std::clamp(t, t_begin, t_end);
-    const int ka = static_cast<int>(std::floor(g0[a] + W_dir[a] * t));
-    const int kb = static_cast<int>(std::floor(g0[b] + W_dir[b] * t));
+    const int ka = floorToInt(g0[a] + W_dir[a] * t);
+    const int kb = floorToInt(g0[b] + W_dir[b] * t);
     if (km < 0 || km > nm || ka < 0 || ka > na || kb < 0 || kb > nb) return;
     put(km * stride[m] + ka * stride[a] + kb * stride[b], profile.at(static_cast<float>(t * c)));
     ++written;
@@ -62,17 +64,19 @@ uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vecto
   // The minor coordinates step in 32.32 fixed point: exact sums, floor by shift.
   constexpr double kOne = 4294967296.0;  // 2^32
   const float t1 = static_cast<float>(t0 + dt);
-  int64_t pa = std::llround((g0[a] + W_dir[a] * (t0 + dt)) * kOne);
-  int64_t pb = std::llround((g0[b] + W_dir[b] * (t0 + dt)) * kOne);
-  const int64_t dta = std::llround(W_dir[a] * dt * kOne), dtb = std::llround(W_dir[b] * dt * kOne);
+  int64_t pa = roundToInt64((g0[a] + W_dir[a] * (t0 + dt)) * kOne);
+  int64_t pb = roundToInt64((g0[b] + W_dir[b] * (t0 + dt)) * kOne);
+  const int64_t dta = roundToInt64(W_dir[a] * dt * kOne), dtb = roundToInt64(W_dir[b] * dt * kOne);
   const float dtf = static_cast<float>(dt), cf = static_cast<float>(c);
   int64_t idx_m = static_cast<int64_t>(k0 + step) * stride[m];
   const int64_t didx_m = step * stride[m];
   const int64_t sa = stride[a], sb = stride[b];
   const float inv_cf = static_cast<float>(inv_c);
   auto firstWith = [&](float u) {  // first inner k whose t_k reaches (l_p + u) / c (n - 1 if none)
-    const float steps = std::ceil(((profile.l_p_m + u) * inv_cf - t1) / dtf);
-    return steps <= 0.0f ? 1 : (steps >= static_cast<float>(n) ? n - 1 : std::min(n - 1, 1 + static_cast<int>(steps)));
+    const float steps = ((profile.l_p_m + u) * inv_cf - t1) / dtf;  // +inf for free space
+    if (!(steps > 0.0f)) return 1;
+    if (steps > static_cast<float>(n - 1)) return n - 1;
+    return std::min(n - 1, 1 + ceilToInt(steps));
   };
   // Free space up to the measurement's front: one value for all those cells.
   const int k_free = firstWith(profile.front_m);
@@ -205,7 +209,7 @@ void LineDrawer::descendBounded(const BoundedDescent& b, int level, int x, int y
   const Eigen::Vector3d C_ray = camera_.rayThroughPixel(X, Y);
   const double norm = C_ray.norm();
   const RangeProfile nearest = pixelProfile(camera_, table_, X, Y, d_max);
-  const double l_shared = std::min(std::ldexp(b.cell_f_m_px, -level) * norm,
+  const double l_shared = std::min(b.cell_f_m_px * powerOfTwo(-level) * norm,
                                    static_cast<double>(nearest.l_p_m + nearest.front_m));
   if (l_shared > l_begin) {
     ++stats->coordinate_transfers;

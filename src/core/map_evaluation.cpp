@@ -41,6 +41,40 @@ ObservedGroundTruth observeGroundTruth(const FlightScenario& scenario, double re
   return truth;
 }
 
+std::vector<Eigen::Vector3i> frameSurfaceCells(const FlightScenario& scenario, size_t frame, double resolution_m,
+                                               double max_range_m) {
+  const StereoCameraModel camera(scenario.camera);
+  const Eigen::Isometry3d T_W_C = scenario.cameraPose(frame);
+  cv::Mat depth;
+  renderTrueDisparity(scenario, frame, &depth);
+  std::unordered_set<uint64_t> seen;
+  std::vector<Eigen::Vector3i> cells;
+  for (int y = 0; y < depth.rows; ++y)
+    for (int x = 0; x < depth.cols; ++x) {
+      const float z = depth.at<float>(y, x);
+      if (!std::isfinite(z)) continue;  // sky
+      const Eigen::Vector3d C_ray = camera.rayThroughPixel(x, y);
+      const double range = z * C_ray.norm();
+      if (range > max_range_m) continue;
+      // Just behind the hit point, as in observeGroundTruth().
+      const Eigen::Vector3d W_point = T_W_C * (C_ray * (z * (1.0 + 1e-6 / range)));
+      const Eigen::Vector3i g = LocalGrid::globalIndex(W_point, resolution_m);
+      if (seen.insert(packCell(g)).second) cells.push_back(g);
+    }
+  return cells;
+}
+
+size_t countCalledFree(const LocalGrid& grid, const std::vector<Eigen::Vector3i>& cells) {
+  size_t called_free = 0;
+  for (const Eigen::Vector3i& g : cells) {
+    const Eigen::Vector3i local = g - grid.originIndex();
+    if (!grid.contains(local)) continue;
+    const float v = grid.at(local.x(), local.y(), local.z());
+    called_free += v < 0.0f && v != LocalGrid::kUnknown;
+  }
+  return called_free;
+}
+
 std::string MapQuality::toJson() const {
   std::ostringstream out;
   out << "{\"occupied_cells\": " << occupied_cells << ", \"occupied_at_surface\": " << occupied_at_surface

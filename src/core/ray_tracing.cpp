@@ -4,6 +4,8 @@
 #include <array>
 #include <cmath>
 
+#include "stereo_occupancy/integer_math.h"
+
 namespace stereo_occupancy {
 
 RayTracer::RayTracer(const StereoCameraModel& camera, const LogOddsTable& table, const PyramidLevelTable& levels)
@@ -71,8 +73,8 @@ void RayTracer::traverse(const Eigen::Isometry3d& T_W_C, LocalGrid* grid, DrawSt
       rowInterval(A, &x_lo, &x_hi);
       if (x_hi < x_lo - 1.0) continue;
       // One cell of slack on each side for rounding; the tests below are exact.
-      const int x_first = std::max(0, static_cast<int>(std::floor(x_lo)) - 1);
-      const int x_last = std::min(size.x() - 1, static_cast<int>(std::ceil(x_hi)) + 1);
+      const int x_first = std::max(0, floorToInt(x_lo) - 1);
+      const int x_last = std::min(size.x() - 1, ceilToInt(x_hi) + 1);
       Eigen::Vector3d C_p = A + x_first * S;
       float* row = data + grid->linearIndex(0, y, z);
       for (int x = x_first; x <= x_last; ++x, C_p += S) {
@@ -127,10 +129,10 @@ void RayTracer::drawImage(const DisparityPyramid& max_pyramid, const Eigen::Isom
     }
     int x0 = 0, x1 = image.cols - 1, y0 = 0, y1 = image.rows - 1;
     if (!behind) {
-      x0 = std::max(x0, static_cast<int>(std::floor(u0 + 0.5)));
-      x1 = std::min(x1, static_cast<int>(std::floor(u1 + 0.5)));
-      y0 = std::max(y0, static_cast<int>(std::floor(v0 + 0.5)));
-      y1 = std::min(y1, static_cast<int>(std::floor(v1 + 0.5)));
+      x0 = std::max(x0, floorToInt(u0 + 0.5));
+      x1 = std::min(x1, floorToInt(u1 + 0.5));
+      y0 = std::max(y0, floorToInt(v0 + 0.5));
+      y1 = std::min(y1, floorToInt(v1 + 0.5));
     }
     float m = DisparityPyramid::kInvalidMax;
     for (int yy = y0; yy <= y1; ++yy) {
@@ -150,9 +152,9 @@ void RayTracer::drawPyramid(const DisparityPyramid& max_pyramid, const Eigen::Is
     const int i = std::clamp(levels_.levelForDepth(C_p.z()), 0, top);
     const cv::Mat& level = max_pyramid.level(i);
     // The 2x2 level-i pixels whose centres surround (u, v) (section VI-C).
-    const double s = std::ldexp(1.0, -i);
-    const int x0 = static_cast<int>(std::floor((u + 0.5) * s - 0.5));
-    const int y0 = static_cast<int>(std::floor((v + 0.5) * s - 0.5));
+    const double s = powerOfTwo(-i);
+    const int x0 = floorToInt((u + 0.5) * s - 0.5);
+    const int y0 = floorToInt((v + 0.5) * s - 0.5);
     float m = DisparityPyramid::kInvalidMax;
     for (int yy = std::max(y0, 0); yy <= y0 + 1 && yy < level.rows; ++yy) {
       const float* row = level.ptr<float>(yy);
@@ -214,10 +216,39 @@ void RayTracer::drawPyramidBounded(const DisparityPyramid& min_pyramid, const Di
     const double s = 1.0 / static_cast<double>(1 << i);
     const int bx0 = std::max(0, static_cast<int>(x_lo * s));  // truncation: floor, or <= 0
     const int by0 = std::max(0, static_cast<int>(y_lo * s));
-    const int bx1 = std::min(max_pyramid.width(i) - 1, static_cast<int>(std::ceil(x_hi * s)) - 1);
-    const int by1 = std::min(max_pyramid.height(i) - 1, static_cast<int>(std::ceil(y_hi * s)) - 1);
-    for (int by = by0; by <= by1; ++by)
-      for (int bx = bx0; bx <= bx1; ++bx) visit(visit, i, bx, by);
+    const int bx1 = std::min(max_pyramid.width(i) - 1, ceilToInt(x_hi * s) - 1);
+    const int by1 = std::min(max_pyramid.height(i) - 1, ceilToInt(y_hi * s) - 1);
+    // Nearest blocks first: once one is resolved, farther ones are skipped.
+    struct Block {
+      float hi;
+      int bx, by;
+    };
+    std::array<Block, 16> blocks;
+    int n = 0;
+    const cv::Mat& level_i = max_pyramid.level(i);
+    for (int by = by0; by <= by1; ++by) {
+      const float* row = level_i.ptr<float>(by);
+      for (int bx = bx0; bx <= bx1 && n < static_cast<int>(blocks.size()); ++bx) blocks[n++] = {row[bx], bx, by};
+    }
+    st->used_image_pixels += static_cast<uint64_t>(n);
+    if (n == 0) return m;
+    int best = 0;
+    for (int k = 1; k < n; ++k) best = blocks[k].hi > blocks[best].hi ? k : best;
+    const Block& nearest = blocks[best];
+    if (nearest.hi < 0.0f) return m;  // no valid pixel
+    // The usual case: the nearest block is uniform enough or wholly inside.
+    if (i == j_min || inside(nearest.bx, nearest.by, i) ||
+        bound.isFaithful(min_pyramid.level(i).ptr<float>(nearest.by)[nearest.bx], nearest.hi)) {
+      ++st->used_image_pixels;
+      return nearest.hi;
+    }
+    for (int k = 1; k < n; ++k) {  // insertion sort, by descending maximum
+      const Block block = blocks[k];
+      int q = k;
+      for (; q > 0 && blocks[q - 1].hi < block.hi; --q) blocks[q] = blocks[q - 1];
+      blocks[q] = block;
+    }
+    for (int k = 0; k < n && blocks[k].hi > m; ++k) visit(visit, i, blocks[k].bx, blocks[k].by);
     return m;
   });
 }

@@ -267,13 +267,9 @@ void DisparityMapper::disparityCallback(const stereo_msgs::DisparityImageConstPt
   auto refuse = [this](const std::string& why) { this->refuse("disparity image", why); };
   if (msg->image.encoding != sensor_msgs::image_encodings::TYPE_32FC1)
     return refuse("encoding '" + msg->image.encoding + "', expected 32FC1");
-  if (static_cast<uint64_t>(msg->image.width) * msg->image.height > static_cast<uint64_t>(params_.max_image_pixels))
-    return refuse("image larger than max_image_pixels");
-  if (msg->image.step < msg->image.width * 4 ||
-      msg->image.data.size() < static_cast<size_t>(msg->image.step) * msg->image.height || msg->image.width == 0)
-    return refuse("image size and data do not fit together");
-  StereoCameraConfig camera;
   std::string why;
+  if (!checkImageLayout(msg->image, static_cast<uint64_t>(params_.max_image_pixels), &why)) return refuse(why);
+  StereoCameraConfig camera;
   if (!cameraFromDisparityImage(*msg, info.get(), params_, &camera, &why)) return refuse(why);
   cv_bridge::CvImageConstPtr image;
   try {
@@ -291,10 +287,9 @@ void DisparityMapper::depthCallback(const sensor_msgs::ImageConstPtr& msg) {
   auto refuse = [this](const std::string& why) { this->refuse("depth image", why); };
   if (!info) return refuse("no camera_info received yet");
   if (info->width != msg->width || info->height != msg->height) return refuse("camera_info size differs");
-  if (static_cast<uint64_t>(msg->width) * msg->height > static_cast<uint64_t>(params_.max_image_pixels))
-    return refuse("image larger than max_image_pixels");
-  StereoCameraConfig camera;
   std::string why;
+  if (!checkImageLayout(*msg, static_cast<uint64_t>(params_.max_image_pixels), &why)) return refuse(why);
+  StereoCameraConfig camera;
   if (!cameraFromDepthInfo(*info, params_, &camera, &why)) return refuse(why);
   cv::Mat disparity;
   try {

@@ -1,5 +1,6 @@
 #include "stereo_occupancy/ros/conversions.h"
 
+#include <sensor_msgs/image_encodings.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
 
 #include "stereo_occupancy/map_rendering.h"
@@ -10,6 +11,31 @@
 #include <sstream>
 
 namespace stereo_occupancy {
+
+bool checkImageLayout(const sensor_msgs::Image& image, uint64_t max_pixels, std::string* why) {
+  auto fail = [why](const std::string& text) {
+    if (why) *why = text;
+    return false;
+  };
+  uint64_t bytes_per_pixel = 0;
+  try {
+    namespace enc = sensor_msgs::image_encodings;
+    bytes_per_pixel = static_cast<uint64_t>(enc::numChannels(image.encoding)) * (enc::bitDepth(image.encoding) / 8);
+  } catch (const std::exception&) {
+    return fail("unknown encoding '" + image.encoding + "'");
+  }
+  if (bytes_per_pixel == 0) return fail("encoding '" + image.encoding + "' has no whole bytes per pixel");
+  if (image.width == 0 || image.height == 0) return fail("empty image");
+  const uint64_t pixels = static_cast<uint64_t>(image.width) * image.height;
+  if (pixels > max_pixels)
+    return fail("image of " + std::to_string(pixels) + " pixels, more than " + std::to_string(max_pixels));
+  if (static_cast<uint64_t>(image.step) < image.width * bytes_per_pixel)
+    return fail("step " + std::to_string(image.step) + " is shorter than a row");
+  if (image.data.size() < static_cast<uint64_t>(image.step) * image.height)
+    return fail("image size and data do not fit together (" + std::to_string(image.data.size()) + " bytes for " +
+                std::to_string(image.height) + " rows of " + std::to_string(image.step) + ")");
+  return true;
+}
 
 bool cameraFromDisparityImage(const stereo_msgs::DisparityImage& msg, const sensor_msgs::CameraInfo* info,
                               const DisparityMapperParameters& params, StereoCameraConfig* camera, std::string* why) {

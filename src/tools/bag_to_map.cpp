@@ -141,9 +141,16 @@ int main(int argc, char** argv) {
           continue;
         }
         const auto t0 = Clock::now();
-        if (!drawer || drawer->camera().config() != im.camera)
-          drawer = std::make_unique<so::DisparityDrawer>(im.camera, mapper.drawing);
-        drawer->draw(im.disparity, T_W_C, &grid);
+        try {  // one bad image (a camera or a pose the drawer refuses) does not end the run
+          if (!drawer || drawer->camera().config() != im.camera)
+            drawer = std::make_unique<so::DisparityDrawer>(im.camera, mapper.drawing);
+          drawer->draw(im.disparity, T_W_C, &grid);
+        } catch (const std::invalid_argument& e) {
+          ++refused;
+          std::cerr << "\nbag_to_map: refused an image: " << e.what() << std::endl;
+          pending.pop_front();
+          continue;
+        }
         so::encodeGridUpdate(grid, T_W_C.translation(), &update);
         const auto t1 = Clock::now();
         if (!map.integrate(update, &error)) throw std::runtime_error(error);
@@ -172,8 +179,11 @@ int main(int argc, char** argv) {
         try {
           if (depth_topic.empty()) {
             const auto msg = m.instantiate<stereo_msgs::DisparityImage>();
-            if (!msg || msg->image.encoding != sensor_msgs::image_encodings::TYPE_32FC1)
-              throw std::runtime_error("not a 32FC1 DisparityImage");
+            if (!msg) throw std::runtime_error("not a stereo_msgs/DisparityImage");
+            if (msg->image.encoding != sensor_msgs::image_encodings::TYPE_32FC1)
+              throw std::runtime_error("encoding '" + msg->image.encoding + "', expected 32FC1");
+            if (!so::checkImageLayout(msg->image, static_cast<uint64_t>(mapper.max_image_pixels), &why))
+              throw std::runtime_error(why);
             if (!so::cameraFromDisparityImage(*msg, info.get(), mapper, &im.camera, &why))
               throw std::runtime_error(why);
             im.disparity = cv_bridge::toCvCopy(msg->image)->image;
@@ -182,6 +192,10 @@ int main(int argc, char** argv) {
           } else {
             const auto msg = m.instantiate<sensor_msgs::Image>();
             if (!msg || !info) throw std::runtime_error("a depth image without camera_info");
+            if (!so::checkImageLayout(*msg, static_cast<uint64_t>(mapper.max_image_pixels), &why))
+              throw std::runtime_error(why);
+            if (info->width != msg->width || info->height != msg->height)
+              throw std::runtime_error("camera_info size differs from the depth image's");
             if (!so::cameraFromDepthInfo(*info, mapper, &im.camera, &why)) throw std::runtime_error(why);
             so::depthToDisparity(cv_bridge::toCvShare(msg)->image, im.camera.baseline_m * im.camera.focal_length_px,
                                  &im.disparity);

@@ -1,4 +1,4 @@
-// compare_octomap: the same simulated flight mapped by the four algorithms
+// compare_octomap: the same simulated flight mapped by the six algorithms
 // and by OctoMap's own insertPointCloud (what octomap_server does, with and
 // without discretize), in one run, at the same resolutions and range: time
 // per frame and map quality against the ground truth, as a Markdown table.
@@ -19,8 +19,10 @@
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
 #include "stereo_occupancy/map_evaluation.h"
+#include "tool_support.h"
 
 namespace so = stereo_occupancy;
+namespace tools = stereo_occupancy::tools;
 using Clock = std::chrono::steady_clock;
 
 namespace {
@@ -39,9 +41,13 @@ std::string num(double v, int digits = 2) {
   return o.str();
 }
 
-}  // namespace
 
-int main(int argc, char** argv) {
+const char* kUsage =
+    "usage: compare_octomap [--scenario posts|houses|forest|wires] [--frame-step N] [--seed N]\n"
+    "                       [--resolution M [--resolution M ...]] [--truth-pixel-step N]\n"
+    "--truth-pixel-step: true surface cells from every N-th pixel (default 4; 1 finds wires)\n";
+
+int run(int argc, char** argv) {
   std::string scenario_name = "posts";
   int frame_step = 4;
   uint32_t seed = 1;
@@ -50,27 +56,33 @@ int main(int argc, char** argv) {
   int truth_pixel_step = 4;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--scenario" && i + 1 < argc) scenario_name = argv[++i];
-    else if (a == "--frame-step" && i + 1 < argc) frame_step = std::max(1, std::atoi(argv[++i]));
-    else if (a == "--seed" && i + 1 < argc) seed = static_cast<uint32_t>(std::atoi(argv[++i]));
-    else if (a == "--truth-pixel-step" && i + 1 < argc) truth_pixel_step = std::max(1, std::atoi(argv[++i]));
-    else if (a == "--resolution" && i + 1 < argc) {  // repeatable
+    if (a == "--help") {
+      std::cout << kUsage;
+      return 0;
+    } else if (a == "--scenario") {
+      scenario_name = tools::nextValue(argc, argv, &i);
+    } else if (a == "--frame-step") {
+      frame_step = static_cast<int>(tools::parseWhole(a, tools::nextValue(argc, argv, &i), 1, 10000));
+    } else if (a == "--seed") {
+      seed = static_cast<uint32_t>(tools::parseWhole(a, tools::nextValue(argc, argv, &i), 0, 4294967295L));
+    } else if (a == "--truth-pixel-step") {
+      truth_pixel_step = static_cast<int>(tools::parseWhole(a, tools::nextValue(argc, argv, &i), 1, 64));
+    } else if (a == "--resolution") {  // repeatable
       if (!resolution_given) resolutions.clear();
       resolution_given = true;
-      resolutions.push_back(std::atof(argv[++i]));
-      if (!(resolutions.back() >= 0.01)) {
-        std::cerr << "compare_octomap: --resolution must be >= 0.01 m\n";
-        return 2;
-      }
-    }
-    else {
-      std::cerr << "usage: compare_octomap [--scenario posts|houses|forest|wires] [--frame-step N] [--seed N]\n"
-                   "                       [--resolution M [--resolution M ...]] [--truth-pixel-step N]\n"
-                   "--truth-pixel-step: true surface cells from every N-th pixel (default 4; 1 finds wires)\n";
-      return a == "--help" ? 0 : 2;
+      resolutions.push_back(tools::parseNumber(a, tools::nextValue(argc, argv, &i)));
+      if (!(resolutions.back() >= 0.05 && resolutions.back() <= 10.0))
+        throw tools::UsageError("--resolution must be in [0.05, 10] m");
+    } else {
+      throw tools::UsageError("unknown option '" + a + "'");
     }
   }
-  so::FlightScenario scenario = so::makeScenario(scenario_name);
+  so::FlightScenario scenario;
+  try {
+    scenario = so::makeScenario(scenario_name);
+  } catch (const std::invalid_argument& e) {
+    throw tools::UsageError(e.what());
+  }
   // Only every frame_step-th frame is mapped (OctoMap takes seconds a frame).
   std::vector<Eigen::Isometry3d> poses;
   std::vector<cv::Mat> images;
@@ -89,15 +101,25 @@ int main(int argc, char** argv) {
             << "), 640x480, 25 m range. One thread. Time per frame, median over the frames.\n"
             << "Ours: draw (incl. pyramid) + encode, then fusion into the OcTree (MapAccumulator). OctoMap: "
                "insertPointCloud of the valid pixels' points (zero disparity has no point), max range 25 m.\n"
-            << "Quality within one cell against the ground truth of the mapped frames (surface cells from every "
-            << truth_pixel_step << ". pixel, empty cells from every 4th).\n\n"
+            << "Quality within one cell against the ground truth of the mapped frames (surface cells from "
+            << (truth_pixel_step == 1 ? std::string("every pixel") : "every " + std::to_string(truth_pixel_step) + "th pixel")
+            << ", empty cells from every 4th).\n\n"
+            << "\"frame: surface called free\" counts, over the frames, the cells of each frame's own true "
+               "surfaces (every pixel) that the frame's local grid calls free: the drawing alone, before fusion.\n\n"
             << "| cell | method | draw ms | fusion ms | total ms | occupied precision % | occupied recall % | "
-               "surface called free % | free coverage % |\n|---|---|---:|---:|---:|---:|---:|---:|---:|\n";
+               "surface called free % | free coverage % | frame: surface called free % |\n"
+               "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n";
 
   for (double res : resolutions) {
     const so::ObservedGroundTruth truth = so::observeGroundTruth(truth_flight, res, max_range, 1, 4, truth_pixel_step);
+    std::vector<std::vector<Eigen::Vector3i>> frame_surfaces;
+    size_t frame_surface_cells = 0;
+    for (size_t i = 0; i < truth_flight.T_W_B.size(); ++i) {
+      frame_surfaces.push_back(so::frameSurfaceCells(truth_flight, i, res, max_range));
+      frame_surface_cells += frame_surfaces.back().size();
+    }
     auto report = [&](const std::string& name, std::vector<double> draw, std::vector<double> fuse,
-                      const octomap::OcTree& tree) {
+                      const octomap::OcTree& tree, const std::string& frame_called_free) {
       auto median = [](std::vector<double> v) {
         if (v.empty()) return 0.0;
         std::sort(v.begin(), v.end());
@@ -109,7 +131,7 @@ int main(int argc, char** argv) {
       std::cout << "| " << res << " m | " << name << " | " << num(median(draw), 3) << " | " << num(median(fuse), 3)
                 << " | " << num(median(total), 3) << " | " << pct(q.occupiedPrecision()) << " | "
                 << pct(q.occupiedRecall()) << " | " << pct(q.surfaceCalledFree()) << " | " << pct(q.freeCoverage())
-                << " |" << std::endl;
+                << " | " << frame_called_free << " |" << std::endl;
     };
     for (so::DrawingAlgorithm algorithm : so::allDrawingAlgorithms()) {
       so::DrawingConfig config;
@@ -122,6 +144,7 @@ int main(int argc, char** argv) {
       so::LocalGrid grid;
       so::GridUpdate update;
       std::vector<double> draw, fuse;
+      size_t called_free = 0;
       for (size_t i = 0; i < images.size(); ++i) {
         const auto t0 = Clock::now();
         drawer.draw(images[i], poses[i], &grid);
@@ -131,8 +154,10 @@ int main(int argc, char** argv) {
         const auto t2 = Clock::now();
         draw.push_back(ms(t0, t1));
         fuse.push_back(ms(t1, t2));
+        called_free += so::countCalledFree(grid, frame_surfaces[i]);
       }
-      report(so::toString(algorithm), draw, fuse, map.tree());
+      report(so::toString(algorithm), draw, fuse, map.tree(),
+             pct(frame_surface_cells ? static_cast<double>(called_free) / frame_surface_cells : 0.0));
     }
     for (bool discretize : {false, true}) {
       octomap::OcTree tree(res);
@@ -156,8 +181,15 @@ int main(int argc, char** argv) {
         draw.push_back(ms(t0, t1));
         fuse.push_back(ms(t1, t2));
       }
-      report(discretize ? "OctoMap insertPointCloud, discretize" : "OctoMap insertPointCloud", draw, fuse, tree);
+      report(discretize ? "OctoMap insertPointCloud, discretize" : "OctoMap insertPointCloud", draw, fuse, tree,
+             "-");  // no grid of its own per frame
     }
   }
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return so::tools::runTool("compare_octomap", [&] { return run(argc, argv); });
 }

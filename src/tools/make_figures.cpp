@@ -14,8 +14,18 @@
 
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/synthetic_scene.h"
+#include "tool_support.h"
 
 namespace so = stereo_occupancy;
+
+namespace {
+
+/// cv::imwrite that fails loudly.
+void writeImage(const std::string& path, const cv::Mat& image) {
+  if (!cv::imwrite(path, image)) throw std::runtime_error("cannot write '" + path + "'");
+}
+
+}  // namespace
 
 namespace {
 
@@ -93,7 +103,7 @@ void figure1(const std::string& path) {
     plot.curve(pts, colours[i]);
     plot.legend(i, "l_p = " + std::to_string(static_cast<int>(ranges[i])) + " m", colours[i]);
   }
-  cv::imwrite(path, plot.image());
+  writeImage(path, plot.image());
 }
 
 void figure3(const std::string& path) {
@@ -119,7 +129,7 @@ void figure3(const std::string& path) {
   plot.legend(1, "2^i-pixel footprint (eq. 12)", kBlue);
   plot.legend(2, "level i (x 0.2)", kRed);
   plot.legend(3, "0.5 c and c (eq. 13)", kGreen);
-  cv::imwrite(path, plot.image());
+  writeImage(path, plot.image());
 }
 
 void figure5(const std::string& path) {
@@ -161,21 +171,26 @@ void figure5(const std::string& path) {
               cv::LINE_AA);
   cv::putText(both, "+ blur, s_trans 0.1 m, s_angle 0.02 rad (eq. 17)", cv::Point(a.cols + 25, 25),
               cv::FONT_HERSHEY_SIMPLEX, 0.5, kBlack, 1, cv::LINE_AA);
-  cv::imwrite(path, both);
+  writeImage(path, both);
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  const std::string dir = argc > 1 ? argv[1] : ".";
-  try {
+  return so::tools::runTool("make_figures", [&] {
+    if (argc > 2 || (argc == 2 && std::string(argv[1]).rfind("--", 0) == 0)) {
+      if (argc == 2 && std::string(argv[1]) == "--help") {
+        std::cout << "usage: make_figures [DIR]  (writes Figs. 1, 3 and 5 of the paper as PNG files)\n";
+        return 0;
+      }
+      throw so::tools::UsageError("expects at most one argument, the output directory");
+    }
+    const std::string dir = argc > 1 ? argv[1] : ".";
     figure1(dir + "/fig1_inverse_sensor_model.png");
     figure3(dir + "/fig3_pyramid_levels.png");
     figure5(dir + "/fig5_blur.png");
-  } catch (const std::exception& e) {
-    std::cerr << "make_figures: error: " << e.what() << std::endl;
-    return 1;
-  }
-  std::cout << "wrote " << dir << "/fig1_inverse_sensor_model.png, fig3_pyramid_levels.png, fig5_blur.png" << std::endl;
-  return 0;
+    std::cout << "wrote " << dir << "/fig1_inverse_sensor_model.png, fig3_pyramid_levels.png, fig5_blur.png"
+              << std::endl;
+    return 0;
+  });
 }

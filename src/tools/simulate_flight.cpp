@@ -20,8 +20,10 @@
 
 #include "stereo_occupancy/flight_simulation.h"
 #include "stereo_occupancy/ros/conversions.h"
+#include "tool_support.h"
 
 namespace so = stereo_occupancy;
+namespace tools = stereo_occupancy::tools;
 
 namespace {
 
@@ -32,93 +34,100 @@ int usage(int code) {
   return code;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+int run(int argc, char** argv) {
   std::string scenario_name, output;
   uint32_t seed = 1;
   long frames = -1;
   bool true_depth = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--scenario" && i + 1 < argc) scenario_name = argv[++i];
-    else if (a == "--output" && i + 1 < argc) output = argv[++i];
-    else if (a == "--seed" && i + 1 < argc) seed = static_cast<uint32_t>(std::stoul(argv[++i]));
-    else if (a == "--frames" && i + 1 < argc) frames = std::stol(argv[++i]);
+    if (a == "--scenario") scenario_name = tools::nextValue(argc, argv, &i);
+    else if (a == "--output") output = tools::nextValue(argc, argv, &i);
+    else if (a == "--seed") seed = static_cast<uint32_t>(tools::parseWhole(a, tools::nextValue(argc, argv, &i), 0, 4294967295L));
+    else if (a == "--frames") frames = tools::parseWhole(a, tools::nextValue(argc, argv, &i), 1, 1000000);
     else if (a == "--true-depth") true_depth = true;
-    else return usage(a == "--help" ? 0 : 2);
+    else if (a == "--help") return usage(0);
+    else throw tools::UsageError("unknown option '" + a + "'");
   }
-  if (scenario_name.empty() || output.empty()) return usage(2);
+  if (scenario_name.empty() || output.empty()) throw tools::UsageError("--scenario and --output are required");
+  so::FlightScenario s;
   try {
-    const so::FlightScenario s = so::makeScenario(scenario_name);
-    const size_t n = frames > 0 ? std::min<size_t>(frames, s.T_W_B.size()) : s.T_W_B.size();
-    rosbag::Bag bag(output, rosbag::bagmode::Write);
-    bag.setCompression(rosbag::compression::LZ4);
-    const ros::Time start(1700000000.0);
-    std_msgs::String scene;
-    scene.data = "scenario " + s.name + " seed " + std::to_string(seed) + "\n" + so::describeScene(s.scene);
-    bag.write("/ground_truth/scene", start, scene);
-    std::ofstream(output + ".scene.txt") << scene.data;
-
-    sensor_msgs::CameraInfo info;
-    info.header.frame_id = "camera_optical";
-    info.width = s.camera.width_px;
-    info.height = s.camera.height_px;
-    info.distortion_model = "plumb_bob";
-    info.D.assign(5, 0.0);
-    info.K = {s.camera.focal_length_px, 0, s.camera.cx_px, 0, s.camera.focal_length_px, s.camera.cy_px, 0, 0, 1};
-    info.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-    info.P = {s.camera.focal_length_px, 0, s.camera.cx_px, 0, 0, s.camera.focal_length_px, s.camera.cy_px, 0, 0, 0, 1, 0};
-
-    for (size_t i = 0; i < n; ++i) {
-      const ros::Time stamp = start + ros::Duration(i / s.frame_rate_hz);
-      tf2_msgs::TFMessage tf;
-      tf.transforms.push_back(so::toTransformMsg(s.T_W_B[i], stamp, "map", "base_link"));
-      tf.transforms.push_back(so::toTransformMsg(s.T_B_C, stamp, "base_link", "camera_optical"));
-      bag.write("/tf", stamp, tf);
-
-      const cv::Mat d = so::renderStereoFrame(s, i, seed);
-      stereo_msgs::DisparityImage msg;
-      msg.header.stamp = stamp;
-      msg.header.frame_id = "camera_optical";
-      msg.image.header = msg.header;
-      msg.image.width = d.cols;
-      msg.image.height = d.rows;
-      msg.image.encoding = "32FC1";
-      msg.image.step = d.cols * 4;
-      msg.image.data.resize(d.total() * 4);
-      std::memcpy(msg.image.data.data(), d.data, msg.image.data.size());
-      msg.f = static_cast<float>(s.camera.focal_length_px);
-      msg.T = static_cast<float>(s.camera.baseline_m);
-      msg.min_disparity = 0.0f;
-      msg.max_disparity = static_cast<float>(s.effects.max_search_disparity_px);
-      msg.delta_d = static_cast<float>(s.effects.subpixel_step_px);
-      msg.valid_window.width = d.cols;
-      msg.valid_window.height = d.rows;
-      bag.write("/stereo/disparity", stamp + ros::Duration(0.001), msg);
-      if (true_depth) {
-        cv::Mat depth;
-        so::renderTrueDisparity(s, i, &depth);
-        sensor_msgs::Image truth;
-        truth.header = msg.header;
-        truth.width = depth.cols;
-        truth.height = depth.rows;
-        truth.encoding = "32FC1";
-        truth.step = depth.cols * 4;
-        truth.data.resize(depth.total() * 4);
-        std::memcpy(truth.data.data(), depth.data, truth.data.size());
-        bag.write("/ground_truth/depth", stamp + ros::Duration(0.001), truth);
-      }
-      info.header.stamp = stamp;
-      bag.write("/stereo/left/camera_info", stamp + ros::Duration(0.001), info);
-      if (i % 20 == 0) std::cerr << "\rsimulate_flight: " << s.name << " frame " << i + 1 << "/" << n << std::flush;
-    }
-    bag.close();
-    std::cerr << "\rsimulate_flight: " << s.name << ", " << n << " frames at " << s.frame_rate_hz << " Hz -> "
-              << output << std::endl;
-  } catch (const std::exception& e) {
-    std::cerr << "simulate_flight: error: " << e.what() << std::endl;
-    return 1;
+    s = so::makeScenario(scenario_name);
+  } catch (const std::invalid_argument& e) {
+    throw tools::UsageError(e.what());
   }
+  const size_t n = frames > 0 ? std::min<size_t>(frames, s.T_W_B.size()) : s.T_W_B.size();
+  rosbag::Bag bag(output, rosbag::bagmode::Write);
+  bag.setCompression(rosbag::compression::LZ4);
+  const ros::Time start(1700000000.0);
+  std_msgs::String scene;
+  scene.data = "scenario " + s.name + " seed " + std::to_string(seed) + "\n" + so::describeScene(s.scene);
+  bag.write("/ground_truth/scene", start, scene);
+  std::ofstream scene_file(output + ".scene.txt");
+  scene_file << scene.data;
+  if (!scene_file) throw std::runtime_error("cannot write '" + output + ".scene.txt'");
+
+  sensor_msgs::CameraInfo info;
+  info.header.frame_id = "camera_optical";
+  info.width = s.camera.width_px;
+  info.height = s.camera.height_px;
+  info.distortion_model = "plumb_bob";
+  info.D.assign(5, 0.0);
+  info.K = {s.camera.focal_length_px, 0, s.camera.cx_px, 0, s.camera.focal_length_px, s.camera.cy_px, 0, 0, 1};
+  info.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  info.P = {s.camera.focal_length_px, 0, s.camera.cx_px, 0, 0, s.camera.focal_length_px, s.camera.cy_px, 0, 0, 0, 1, 0};
+
+  for (size_t i = 0; i < n; ++i) {
+    const ros::Time stamp = start + ros::Duration(i / s.frame_rate_hz);
+    tf2_msgs::TFMessage tf;
+    tf.transforms.push_back(so::toTransformMsg(s.T_W_B[i], stamp, "map", "base_link"));
+    tf.transforms.push_back(so::toTransformMsg(s.T_B_C, stamp, "base_link", "camera_optical"));
+    bag.write("/tf", stamp, tf);
+
+    const cv::Mat d = so::renderStereoFrame(s, i, seed);
+    stereo_msgs::DisparityImage msg;
+    msg.header.stamp = stamp;
+    msg.header.frame_id = "camera_optical";
+    msg.image.header = msg.header;
+    msg.image.width = d.cols;
+    msg.image.height = d.rows;
+    msg.image.encoding = "32FC1";
+    msg.image.step = d.cols * 4;
+    msg.image.data.resize(d.total() * 4);
+    std::memcpy(msg.image.data.data(), d.data, msg.image.data.size());
+    msg.f = static_cast<float>(s.camera.focal_length_px);
+    msg.T = static_cast<float>(s.camera.baseline_m);
+    msg.min_disparity = 0.0f;
+    msg.max_disparity = static_cast<float>(s.effects.max_search_disparity_px);
+    msg.delta_d = static_cast<float>(s.effects.subpixel_step_px);
+    msg.valid_window.width = d.cols;
+    msg.valid_window.height = d.rows;
+    bag.write("/stereo/disparity", stamp + ros::Duration(0.001), msg);
+    if (true_depth) {
+      cv::Mat depth;
+      so::renderTrueDisparity(s, i, &depth);
+      sensor_msgs::Image truth;
+      truth.header = msg.header;
+      truth.width = depth.cols;
+      truth.height = depth.rows;
+      truth.encoding = "32FC1";
+      truth.step = depth.cols * 4;
+      truth.data.resize(depth.total() * 4);
+      std::memcpy(truth.data.data(), depth.data, truth.data.size());
+      bag.write("/ground_truth/depth", stamp + ros::Duration(0.001), truth);
+    }
+    info.header.stamp = stamp;
+    bag.write("/stereo/left/camera_info", stamp + ros::Duration(0.001), info);
+    if (i % 20 == 0) std::cerr << "\rsimulate_flight: " << s.name << " frame " << i + 1 << "/" << n << std::flush;
+  }
+  bag.close();
+  std::cerr << "\rsimulate_flight: " << s.name << ", " << n << " frames at " << s.frame_rate_hz << " Hz -> "
+            << output << std::endl;
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return so::tools::runTool("simulate_flight", [&] { return run(argc, argv); });
 }

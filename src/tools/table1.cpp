@@ -16,6 +16,7 @@
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/disparity_io.h"
 #include "stereo_occupancy/synthetic_scene.h"
+#include "tool_support.h"
 
 namespace so = stereo_occupancy;
 
@@ -56,20 +57,21 @@ int repeatsFor(so::DrawingAlgorithm a, int base) {
   }
 }
 
-}  // namespace
 
-int main(int argc, char** argv) {
+int run(int argc, char** argv) {
   int repeat = 50;
   std::string save_image;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--repeat" && i + 1 < argc) {
-      repeat = std::max(1, std::atoi(argv[++i]));
-    } else if (a == "--save-image" && i + 1 < argc) {
-      save_image = argv[++i];
+    if (a == "--repeat") {
+      repeat = static_cast<int>(so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 1, 100000));
+    } else if (a == "--save-image") {
+      save_image = so::tools::nextValue(argc, argv, &i);
+    } else if (a == "--help") {
+      std::cout << "usage: table1 [--repeat N] [--save-image FILE.pfm]\n";
+      return 0;
     } else {
-      std::cerr << "usage: table1 [--repeat N] [--save-image FILE.pfm]\n";
-      return a == "--help" ? 0 : 2;
+      throw so::tools::UsageError("unknown option '" + a + "'");
     }
   }
 
@@ -129,4 +131,10 @@ int main(int argc, char** argv) {
     }
   }
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return so::tools::runTool("table1", [&] { return run(argc, argv); });
 }

@@ -21,6 +21,11 @@
 
 namespace stereo_occupancy {
 
+/// True if the image message can be read safely: a known encoding, width and
+/// height > 0, at most @p max_pixels pixels, a step that holds a row and data
+/// that hold step·height bytes. Otherwise false and the reason in @p why.
+bool checkImageLayout(const sensor_msgs::Image& image, uint64_t max_pixels, std::string* why);
+
 /// The camera of a DisparityImage: f and T (baseline) and the valid disparity
 /// interval from the message, the size from its image, Δd = max(delta_d_px,
 /// the message's delta_d), the principal point from @p info when given, else

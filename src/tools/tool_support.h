@@ -1,0 +1,62 @@
+#pragma once
+// Argument parsing and error reporting shared by the command-line tools: a
+// bad argument or file ends a tool with one line "<tool>: error: ..." on
+// stderr and exit status 2 (bad arguments) or 1 (a failure while running),
+// never with an uncaught exception.
+
+#include <cmath>
+#include <cstdlib>
+#include <exception>
+#include <iostream>
+#include <stdexcept>
+#include <string>
+
+namespace stereo_occupancy {
+namespace tools {
+
+/// A bad command line: exit status 2.
+struct UsageError : std::invalid_argument {
+  using std::invalid_argument::invalid_argument;
+};
+
+/// @p text as a finite number, or a UsageError naming @p option.
+inline double parseNumber(const std::string& option, const std::string& text) {
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  if (text.empty() || *end != '\0' || !std::isfinite(v))
+    throw UsageError(option + " expects a finite number, got '" + text + "'");
+  return v;
+}
+
+/// @p text as a whole number in [lo, hi], or a UsageError naming @p option.
+inline long parseWhole(const std::string& option, const std::string& text, long lo, long hi) {
+  char* end = nullptr;
+  const long v = std::strtol(text.c_str(), &end, 10);
+  if (text.empty() || *end != '\0' || v < lo || v > hi)
+    throw UsageError(option + " expects a whole number in [" + std::to_string(lo) + ", " + std::to_string(hi) +
+                     "], got '" + text + "'");
+  return v;
+}
+
+/// The value after option argv[i] (advancing i), or a UsageError.
+inline std::string nextValue(int argc, char** argv, int* i) {
+  if (*i + 1 >= argc) throw UsageError(std::string(argv[*i]) + " needs a value");
+  return argv[++*i];
+}
+
+/// Runs a tool's body; turns exceptions into one error line and an exit status.
+template <typename Body>
+int runTool(const char* name, Body&& body) {
+  try {
+    return body();
+  } catch (const UsageError& e) {
+    std::cerr << name << ": error: " << e.what() << " (see --help)" << std::endl;
+    return 2;
+  } catch (const std::exception& e) {
+    std::cerr << name << ": error: " << e.what() << std::endl;
+    return 1;
+  }
+}
+
+}  // namespace tools
+}  // namespace stereo_occupancy

@@ -1,0 +1,177 @@
+// Every command-line tool against bad arguments and bad files: a clear
+// "<tool>: error: ..." line and exit status 2 (arguments) or 1 (files), never
+// a crash; and bag_to_map skips hostile messages in a bag and maps the rest.
+
+#include <gtest/gtest.h>
+#include <rosbag/bag.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <stereo_msgs/DisparityImage.h>
+#include <sys/wait.h>
+#include <tf2_msgs/TFMessage.h>
+
+#include <array>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/synthetic_scene.h"
+
+namespace so = stereo_occupancy;
+
+namespace {
+
+struct Result {
+  int status = -1;
+  std::string out, err;
+};
+
+Result run(const std::string& command) {
+  Result r;
+  const std::string err_path = ::testing::TempDir() + "tool_errors_stderr.txt";
+  FILE* pipe = popen((command + " 2>" + err_path).c_str(), "r");
+  if (!pipe) return r;
+  std::array<char, 4096> buf;
+  while (fgets(buf.data(), buf.size(), pipe)) r.out += buf.data();
+  r.status = pclose(pipe);
+  std::ifstream in(err_path);
+  r.err.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  return r;
+}
+
+void writeFile(const std::string& path, const std::string& bytes) { std::ofstream(path, std::ios::binary) << bytes; }
+
+/// Runs each command and expects the tool's error line and @p status.
+void expectError(const std::string& tool, const std::vector<std::string>& commands, int status) {
+  for (const std::string& command : commands) {
+    const Result r = run(command);
+    ASSERT_TRUE(WIFEXITED(r.status)) << command << " did not exit (signal)\n" << r.err;
+    EXPECT_EQ(WEXITSTATUS(r.status), status) << command << "\n" << r.err;
+    EXPECT_NE(r.err.find(tool + ": error: "), std::string::npos) << command << "\n" << r.err;
+  }
+}
+
+const std::string kTmp = ::testing::TempDir();
+
+}  // namespace
+
+TEST(ToolErrors, EvaluateMap) {
+  const std::string tool = EVALUATE_MAP_EXE;
+  writeFile(kTmp + "garbage.bt", "this is not an octree\n");
+  writeFile(kTmp + "garbage.ot", "# Octomap OcTree file\nid NoSuchTree\nsize 12\nres 0.25\ndata\n\x01\x02");
+  expectError("evaluate_map",
+              {tool, tool + " --map " + kTmp + "garbage.bt", tool + " --map x.bt --scenario posts --frames abc",
+               tool + " --map x.bt --scenario posts --max-range -3", tool + " --map x.bt --scenario mars",
+               tool + " --map x.bt --scenario posts --frobnicate", tool + " --map x.bt --scenario posts --views"},
+              2);
+  expectError("evaluate_map",
+              {tool + " --map /nonexistent/map.bt --scenario posts", tool + " --map " + kTmp + "garbage.bt --scenario posts",
+               tool + " --map " + kTmp + "garbage.ot --scenario posts"},
+              1);
+}
+
+TEST(ToolErrors, SimulateFlight) {
+  const std::string tool = SIMULATE_FLIGHT_EXE;
+  expectError("simulate_flight",
+              {tool, tool + " --scenario mars --output " + kTmp + "x.bag",
+               tool + " --scenario posts --output " + kTmp + "x.bag --frames -3",
+               tool + " --scenario posts --output " + kTmp + "x.bag --seed 1.5", tool + " --scenario posts --output"},
+              2);
+  expectError("simulate_flight", {tool + " --scenario posts --frames 1 --output /nonexistent/dir/x.bag"}, 1);
+}
+
+TEST(ToolErrors, CompareTable1AndFigures) {
+  const std::string compare = COMPARE_OCTOMAP_EXE, table1 = TABLE1_EXE, figures = MAKE_FIGURES_EXE;
+  expectError("compare_octomap",
+              {compare + " --scenario mars", compare + " --frame-step x", compare + " --frame-step 0",
+               compare + " --resolution 0", compare + " --resolution nan", compare + " --truth-pixel-step"},
+              2);
+  expectError("table1", {table1 + " --repeat 0", table1 + " --repeat x", table1 + " --frobnicate"}, 2);
+  expectError("make_figures", {figures + " a b", figures + " --frobnicate"}, 2);
+  expectError("make_figures", {figures + " /nonexistent/dir"}, 1);
+}
+
+TEST(ToolErrors, BagToMapArgumentsAndFiles) {
+  const std::string tool = BAG_TO_MAP_EXE;
+  writeFile(kTmp + "garbage.bag", "#ROSBAG V2.0\nnot really");
+  expectError("bag_to_map",
+              {tool, tool + " --bag x.bag", tool + " --bag x.bag --output y --param algorithm=bresenham",
+               tool + " --bag x.bag --output y --param resolution_m=-1", tool + " --bag x.bag --output y --param k",
+               tool + " --bag x.bag --output y --frobnicate"},
+              2);
+  expectError("bag_to_map",
+              {tool + " --bag /nonexistent.bag --output " + kTmp + "m", tool + " --bag " + kTmp + "garbage.bag --output " + kTmp + "m"},
+              1);
+}
+
+// A bag whose good images share the stream with hostile ones: the hostile ones
+// are refused one by one, the good ones mapped.
+TEST(ToolErrors, BagToMapSkipsHostileImages) {
+  const std::string bag_path = kTmp + "hostile.bag";
+  const so::StereoCameraModel camera{so::StereoCameraConfig()};
+  Eigen::Isometry3d T_W_C;
+  const cv::Mat image = so::table1Image(camera, &T_W_C);
+  {
+    rosbag::Bag bag(bag_path, rosbag::bagmode::Write);
+    const ros::Time t0(1000.0);
+    tf2_msgs::TFMessage tf;
+    for (int k = 0; k < 12; ++k)
+      tf.transforms.push_back(so::toTransformMsg(T_W_C, t0 + ros::Duration(0.1 * k), "map", "camera_optical"));
+    bag.write("/tf", t0, tf);
+    auto good = [&](int k) {
+      stereo_msgs::DisparityImage m;
+      m.header.stamp = t0 + ros::Duration(0.1 * k);
+      m.header.frame_id = "camera_optical";
+      m.image.header = m.header;
+      m.image.width = image.cols;
+      m.image.height = image.rows;
+      m.image.encoding = "32FC1";
+      m.image.step = image.cols * 4;
+      m.image.data.resize(image.total() * 4);
+      std::memcpy(m.image.data.data(), image.data, m.image.data.size());
+      m.f = 700.0f;
+      m.T = 0.3f;
+      m.max_disparity = 128.0f;
+      return m;
+    };
+    std::vector<stereo_msgs::DisparityImage> msgs;
+    msgs.push_back(good(0));
+    stereo_msgs::DisparityImage m = good(1);
+    m.image.encoding = "mono8";  // wrong encoding
+    msgs.push_back(m);
+    m = good(2);
+    m.image.data.resize(100);  // data shorter than step * height
+    msgs.push_back(m);
+    m = good(3);
+    m.image.step = 4;  // step shorter than a row
+    msgs.push_back(m);
+    m = good(4);
+    m.image.width = m.image.height = 0;  // empty
+    m.image.data.clear();
+    msgs.push_back(m);
+    m = good(5);
+    m.f = std::numeric_limits<float>::quiet_NaN();
+    msgs.push_back(m);
+    m = good(6);
+    m.T = -0.3f;
+    msgs.push_back(m);
+    m = good(7);
+    m.image.height = 240;  // another size than the camera_info-less default: fine, a smaller image
+    m.image.data.resize(m.image.step * 240);
+    msgs.push_back(m);
+    msgs.push_back(good(8));
+    for (const auto& msg : msgs) bag.write("/stereo/disparity", msg.header.stamp, msg);
+  }
+  const Result r = run(std::string(BAG_TO_MAP_EXE) + " --bag " + bag_path + " --output " + kTmp + "hostile_map");
+  ASSERT_TRUE(WIFEXITED(r.status)) << r.err;
+  ASSERT_EQ(WEXITSTATUS(r.status), 0) << r.err;
+  EXPECT_NE(r.out.find("\"images\": 9"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("\"mapped\": 3"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("\"refused\": 6"), std::string::npos) << r.out;
+  for (const char* reason : {"encoding", "do not fit together", "shorter than a row", "empty image", "camera from"})
+    EXPECT_NE(r.err.find(reason), std::string::npos) << reason << "\n" << r.err;
+  std::remove(bag_path.c_str());
+}
