@@ -99,7 +99,7 @@ class PyramidLevelTable {
 
   /// Lowest level used: min(0, level of the maximum range); < 0 means eq. 15 enlargements.
   int minLevel() const { return min_level_; }
-  /// Highest level worth building: that of the nearest valid disparity, at
+  /// Highest level worth building: that of the minimum range's disparity, at
   /// most the level where the image shrinks to one pixel.
   int topLevel() const { return top_level_; }
 

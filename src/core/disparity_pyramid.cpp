@@ -56,7 +56,9 @@ PyramidLevelTable::PyramidLevelTable(const StereoCameraModel& camera, double cel
   min_level_ = std::min(0, std::ilogb(far_disparity_ * c_over_b_));
   const int size_limit =
       std::ilogb(static_cast<double>(std::max(camera.config().width_px, camera.config().height_px)));
-  const double near = camera.nearDisparity();
+  // The nearest range, not the message's search range: drawing the same scene
+  // from a disparity and from a depth camera starts from the same level.
+  const double near = camera.bf() / camera.config().min_range_m;
   const int near_level = std::isfinite(near) ? std::ilogb(near * cell_size_m / camera.config().baseline_m)
                                              : size_limit;
   top_level_ = std::max(0, std::min(near_level, size_limit));

@@ -36,6 +36,23 @@
 
 namespace stereo_occupancy {
 
+namespace {
+
+/// The values in use, as the dynamic_reconfigure server shows them.
+void toConfig(const DisparityMapperParameters& p, DisparityMapperConfig* config) {
+  config->algorithm = toString(p.drawing.algorithm);
+  config->max_range_m = p.camera.max_range_m;
+  config->min_range_m = p.camera.min_range_m;
+  config->delta_d_px = p.camera.delta_d_px;
+  config->k_m = p.drawing.sensor_model.k_m;
+  config->p_min = p.drawing.sensor_model.p_min;
+  config->p_max = p.drawing.sensor_model.p_max;
+  config->sigma_trans_m = p.drawing.blur.sigma_trans_m;
+  config->sigma_angle_rad = p.drawing.blur.sigma_angle_rad;
+}
+
+}  // namespace
+
 class DisparityMapper : public nodelet::Nodelet {
  public:
   ~DisparityMapper() override;
@@ -144,15 +161,7 @@ void DisparityMapper::onInit() {
 
   reconfigure_server_ = std::make_unique<dynamic_reconfigure::Server<DisparityMapperConfig>>(reconfigure_mutex_, pnh);
   DisparityMapperConfig initial;
-  initial.algorithm = toString(params_.drawing.algorithm);
-  initial.max_range_m = params_.camera.max_range_m;
-  initial.min_range_m = params_.camera.min_range_m;
-  initial.delta_d_px = params_.camera.delta_d_px;
-  initial.k_m = params_.drawing.sensor_model.k_m;
-  initial.p_min = params_.drawing.sensor_model.p_min;
-  initial.p_max = params_.drawing.sensor_model.p_max;
-  initial.sigma_trans_m = params_.drawing.blur.sigma_trans_m;
-  initial.sigma_angle_rad = params_.drawing.blur.sigma_angle_rad;
+  toConfig(params_, &initial);
   {
     boost::recursive_mutex::scoped_lock lock(reconfigure_mutex_);
     reconfigure_server_->updateConfig(initial);
@@ -190,8 +199,18 @@ DisparityMapper::~DisparityMapper() {
 }
 
 void DisparityMapper::reconfigure(DisparityMapperConfig& config, uint32_t /*level*/) {
+  // The server clamps each value to its range in the .cfg; cross-checks
+  // (min_range_m < max_range_m, ...) and the algorithm's name are ours. A
+  // refused request leaves the values in use, and the server shows those.
   DisparityMapperParameters next = params_;
-  parseDrawingAlgorithm(config.algorithm, &next.drawing.algorithm);
+  std::string why;
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!parseDrawingAlgorithm(config.algorithm, &next.drawing.algorithm)) {
+    NODELET_WARN("dynamic_reconfigure: algorithm must be one of %s (got '%s'); keeping the previous values",
+                 drawingAlgorithmNames().c_str(), config.algorithm.c_str());
+    toConfig(params_, &config);
+    return;
+  }
   next.camera.max_range_m = config.max_range_m;
   next.camera.min_range_m = config.min_range_m;
   next.camera.delta_d_px = config.delta_d_px;
@@ -200,10 +219,9 @@ void DisparityMapper::reconfigure(DisparityMapperConfig& config, uint32_t /*leve
   next.drawing.sensor_model.p_max = config.p_max;
   next.drawing.blur.sigma_trans_m = config.sigma_trans_m;
   next.drawing.blur.sigma_angle_rad = config.sigma_angle_rad;
-  std::string why;
-  std::lock_guard<std::mutex> lock(mutex_);
   if (!next.isValid(&why)) {
     NODELET_WARN("dynamic_reconfigure: %s; keeping the previous values", why.c_str());
+    toConfig(params_, &config);
     return;
   }
   params_ = next;

@@ -62,7 +62,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   camera.max_disparity_px = in.ranged(5.0, 300.0);
 
   so::DrawingConfig drawing;
-  drawing.algorithm = static_cast<so::DrawingAlgorithm>(in.byte() % 4);
+  drawing.algorithm = so::allDrawingAlgorithms()[in.byte() % so::allDrawingAlgorithms().size()];
   drawing.resolution_m = in.ranged(0.2, 2.0);
   drawing.sensor_model.k_m = in.ranged(0.01, 1.0);
   drawing.sensor_model.p_min = in.ranged(0.05, 0.49);

@@ -303,6 +303,48 @@ TEST_F(MappingTest, DepthInputReconfigureAndInvalidParameters) {
     after = updates_.back();
   }
   EXPECT_NEAR(maxLogOdds(*after), logit(0.5 + 0.05 / (dl * std::sqrt(2 * M_PI))), 0.01);
+
+  // Out of range: the server clamps k_m = 50 to its maximum, 1.
+  auto reconfigureDouble = [&](const std::vector<std::pair<std::string, double>>& values) {
+    dynamic_reconfigure::Reconfigure srv;
+    for (const auto& [name, value] : values) {
+      dynamic_reconfigure::DoubleParameter p;
+      p.name = name;
+      p.value = value;
+      srv.request.config.doubles.push_back(p);
+    }
+    EXPECT_TRUE(ros::service::call("/disparity_mapper/set_parameters", srv));
+    std::map<std::string, double> shown;
+    for (const auto& d : srv.response.config.doubles) shown[d.name] = d.value;
+    return shown;
+  };
+  EXPECT_DOUBLE_EQ(reconfigureDouble({{"k_m", 50.0}})["k_m"], 1.0);
+  // Each in range, together invalid (min_range_m >= max_range_m): refused,
+  // and the server shows the values still in use.
+  std::map<std::string, double> shown = reconfigureDouble({{"k_m", 0.05}, {"min_range_m", 9.0}, {"max_range_m", 5.0}});
+  EXPECT_DOUBLE_EQ(shown["k_m"], 1.0);
+  EXPECT_DOUBLE_EQ(shown["min_range_m"], 0.5);
+  EXPECT_DOUBLE_EQ(shown["max_range_m"], 25.0);
+  // An unknown algorithm: refused likewise.
+  dynamic_reconfigure::Reconfigure bad_algorithm;
+  dynamic_reconfigure::StrParameter algorithm;
+  algorithm.name = "algorithm";
+  algorithm.value = "bresenham";
+  bad_algorithm.request.config.strs.push_back(algorithm);
+  ASSERT_TRUE(ros::service::call("/disparity_mapper/set_parameters", bad_algorithm));
+  ASSERT_EQ(bad_algorithm.response.config.strs.size(), 1u);
+  EXPECT_EQ(bad_algorithm.response.config.strs[0].value, "line_pyramid_bounded");
+  // The next image is drawn with k = 1 (the clamped value, capped at p_max by
+  // the model) and the old range: the wall at 12 m is still there.
+  const ros::Time last = later + ros::Duration(0.1);
+  sendFrame(last);
+  ASSERT_TRUE(waitFor([&] { return updates_.back()->header.stamp == last; }, 20.0));
+  OccupancyUpdateConstPtr clamped;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    clamped = updates_.back();
+  }
+  EXPECT_NEAR(maxLogOdds(*clamped), logit(std::min(0.5 + 1.0 / (dl * std::sqrt(2 * M_PI)), 0.9)), 0.01);
 }
 
 // Hostile input: each bad message is refused without an update, the next
