@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -101,7 +102,7 @@ class DisparityDrawer {
   PyramidLevelTable levels_;
   LineDrawer line_drawer_;
   RayTracer ray_tracer_;
-  DisparityBlockBound bound_;
+  std::unique_ptr<DisparityBlockBound> bound_;  ///< only for the bounded variants
   DisparityPyramid pyramid_;
   DisparityPyramid second_pyramid_;  ///< the other pyramid of a bounded variant
   DistanceDependentBlur blur_;

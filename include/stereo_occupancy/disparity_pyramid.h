@@ -140,14 +140,22 @@ class DisparityBlockBound {
   /// Largest d_max for which a block with this d_min is faithful [px] (0 for sky).
   float maxNearDisparity(float d_min) const {
     const size_t k = static_cast<size_t>(d_min * bins_per_px_);
-    return k < max_d_max_.size() ? max_d_max_[k] : d_min + max_spread_px_;
+    if (k < max_d_max_.size()) return max_d_max_[k];
+    // Beyond the table (disparities above kMaxTabulatedPx): one cell,
+    // z_far - z_near <= c, i.e. d_max <= d_min·bf / (bf - c·d_min).
+    const float rest = bf_ - c_ * d_min;
+    return rest > 0.0f ? d_min * bf_ / rest : std::numeric_limits<float>::infinity();
   }
+
+  /// Disparities up to this are tabulated (8 bins per pixel).
+  static constexpr double kMaxTabulatedPx = 1024.0;
 
  private:
   float far_disparity_;
   float bins_per_px_;
   std::vector<float> max_d_max_;  ///< per bin [k, k+1) / bins_per_px of d_min, conservative over the bin
-  float max_spread_px_;            ///< above the table (nearer than min_range): one cell's spread
+  float bf_;                       ///< b·f [px·m]
+  float c_;                        ///< cell size [m]
 };
 
 }  // namespace stereo_occupancy

@@ -24,7 +24,9 @@ inline int ceilToInt(double x) {
 
 /// std::llround(x) (halves away from zero), for |x| < 2^52.
 inline int64_t roundToInt64(double x) {
-  return x >= 0.0 ? static_cast<int64_t>(x + 0.5) : -static_cast<int64_t>(0.5 - x);
+  const int64_t i = static_cast<int64_t>(x);  // truncates towards zero
+  const double fraction = x - static_cast<double>(i);  // exact for |x| < 2^52
+  return i + (fraction >= 0.5) - (fraction <= -0.5);
 }
 
 /// std::ilogb(x) = floor(log2(x)) for a positive, normal, finite x: its exponent.

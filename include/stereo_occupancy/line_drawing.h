@@ -66,12 +66,12 @@ class LineDrawer {
     double cell_f_m_px;  ///< c·f: level i's rays are one cell apart at depth c·f / 2^i
   };
 
-  /// Draws the line of pixel (x, y) at pyramid level i with disparity d, from range l_begin on.
+  /// Draws the line of pixel (x, y) at pyramid level i with disparity d, from depth z_begin on.
   uint64_t drawPixel(int level, int x, int y, float d_px, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
-                     double l_begin = 0.0) const;
+                     double z_begin = 0.0) const;
   void descend(const DisparityPyramid& pyramid, int level, int x, int y, const Eigen::Isometry3d& T_W_C,
                LocalGrid* grid, DrawStatistics* stats) const;
-  void descendBounded(const BoundedDescent& b, int level, int x, int y, double l_begin, DrawStatistics* stats) const;
+  void descendBounded(const BoundedDescent& b, int level, int x, int y, double z_begin, DrawStatistics* stats) const;
 
   const StereoCameraModel& camera_;
   const LogOddsTable& table_;

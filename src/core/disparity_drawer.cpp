@@ -84,8 +84,11 @@ DisparityDrawer::DisparityDrawer(const StereoCameraConfig& camera, const Drawing
       levels_(camera_, config.resolution_m),
       line_drawer_(camera_, table_, levels_),
       ray_tracer_(camera_, table_, levels_),
-      bound_(camera_, model_, config.resolution_m),
-      blur_(config.blur) {}
+      blur_(config.blur) {
+  if (config_.algorithm == DrawingAlgorithm::kLinePyramidBounded ||
+      config_.algorithm == DrawingAlgorithm::kRayTracePyramidBounded)
+    bound_ = std::make_unique<DisparityBlockBound>(camera_, model_, config_.resolution_m);
+}
 
 void DisparityDrawer::checkInput(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C) const {
   if (disparity.type() != CV_32FC1) throw std::invalid_argument("disparity image must be CV_32FC1");
@@ -133,12 +136,12 @@ DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::
     case DrawingAlgorithm::kLinePyramidBounded:
       pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel());
       second_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel());
-      line_drawer_.drawPyramidBounded(pyramid_, second_pyramid_, bound_, T_W_C, grid, &stats);
+      line_drawer_.drawPyramidBounded(pyramid_, second_pyramid_, *bound_, T_W_C, grid, &stats);
       break;
     case DrawingAlgorithm::kRayTracePyramidBounded:
       pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel());
       second_pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel());
-      ray_tracer_.drawPyramidBounded(second_pyramid_, pyramid_, bound_, T_W_C, grid, &stats);
+      ray_tracer_.drawPyramidBounded(second_pyramid_, pyramid_, *bound_, T_W_C, grid, &stats);
       break;
   }
   stats.different_grid_cells = grid->countKnown();

@@ -83,7 +83,7 @@ DisparityBlockBound::DisparityBlockBound(const StereoCameraModel& camera, const 
     }
     return bf / (z_far - lo);
   };
-  const double near = camera.nearDisparity();
+  const double near = std::min(camera.nearDisparity(), kMaxTabulatedPx);
   const int bins = static_cast<int>(std::ceil(near * bins_per_px_)) + 1;
   max_d_max_.resize(bins);
   double previous = maxNear(0.0);
@@ -92,7 +92,8 @@ DisparityBlockBound::DisparityBlockBound(const StereoCameraModel& camera, const 
     max_d_max_[k] = static_cast<float>(std::min(previous, next));  // d_min anywhere in the bin
     previous = next;
   }
-  max_spread_px_ = static_cast<float>(cell_size_m * near * near / bf);  // one cell at the near limit
+  bf_ = static_cast<float>(bf);
+  c_ = static_cast<float>(cell_size_m);
 }
 
 }  // namespace stereo_occupancy

@@ -22,6 +22,20 @@ Eigen::Isometry3d bodyPose(const Eigen::Vector3d& position, double yaw_rad) {
   return T;
 }
 
+/// n body poses of a flight along +x at speed_mps, weaving sideways as
+/// amplitude_m·sin(omega·t) and heading along its path, at altitude(t).
+template <typename Altitude>
+std::vector<Eigen::Isometry3d> weavingFlight(int n, double rate_hz, double speed_mps, double amplitude_m,
+                                             double omega_rad_s, Altitude&& altitude) {
+  std::vector<Eigen::Isometry3d> poses;
+  for (int i = 0; i < n; ++i) {
+    const double t = i / rate_hz;
+    const double yaw = std::atan2(amplitude_m * omega_rad_s * std::cos(omega_rad_s * t), speed_mps);
+    poses.push_back(bodyPose({speed_mps * t, amplitude_m * std::sin(omega_rad_s * t), altitude(t)}, yaw));
+  }
+  return poses;
+}
+
 FlightScenario postsScenario() {
   FlightScenario s;
   s.name = "posts";
@@ -45,12 +59,8 @@ FlightScenario postsScenario() {
   s.T_B_C = forwardCamera(0.15);
   s.frame_rate_hz = 10.0;
   // 4 m/s at 4 m altitude with a gentle weave, 20 s.
-  for (int i = 0; i < 200; ++i) {
-    const double t = i / s.frame_rate_hz;
-    const double y = 0.75 * std::sin(0.4 * t);
-    const double yaw = std::atan2(0.75 * 0.4 * std::cos(0.4 * t), 4.0);
-    s.T_W_B.push_back(bodyPose({4.0 * t, y, 4.0 + 0.3 * std::sin(0.25 * t)}, yaw));
-  }
+  s.T_W_B = weavingFlight(200, s.frame_rate_hz, 4.0, 0.75, 0.4,
+                          [](double t) { return 4.0 + 0.3 * std::sin(0.25 * t); });
   return s;
 }
 
@@ -106,12 +116,7 @@ FlightScenario forestScenario() {
   s.T_B_C = forwardCamera(0.1);
   s.frame_rate_hz = 10.0;
   // 3 m/s at 3 m altitude down the lane with a slow weave, 20 s.
-  for (int i = 0; i < 200; ++i) {
-    const double t = i / s.frame_rate_hz;
-    const double y = 0.8 * std::sin(0.5 * t);
-    const double yaw = std::atan2(0.8 * 0.5 * std::cos(0.5 * t), 3.0);
-    s.T_W_B.push_back(bodyPose({3.0 * t, y, 3.0}, yaw));
-  }
+  s.T_W_B = weavingFlight(200, s.frame_rate_hz, 3.0, 0.8, 0.5, [](double) { return 3.0; });
   return s;
 }
 

@@ -151,11 +151,13 @@ void LineDrawer::drawImage(const cv::Mat& disparity, const Eigen::Isometry3d& T_
 }
 
 uint64_t LineDrawer::drawPixel(int level, int x, int y, float d_px, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
-                               double l_begin) const {
+                               double z_begin) const {
   const double X = DisparityPyramid::centreOf(level, x, camera_.config().width_px);
   const double Y = DisparityPyramid::centreOf(level, y, camera_.config().height_px);
-  const Eigen::Vector3d W_dir = T_W_C.linear() * camera_.rayThroughPixel(X, Y).normalized();
-  return drawRay(T_W_C.translation(), W_dir, pixelProfile(camera_, table_, X, Y, d_px), grid, l_begin);
+  const Eigen::Vector3d C_ray = camera_.rayThroughPixel(X, Y);  // z = 1
+  const double norm = C_ray.norm();
+  return drawRay(T_W_C.translation(), T_W_C.linear() * (C_ray / norm), pixelProfile(camera_, table_, X, Y, d_px),
+                 grid, z_begin * norm);
 }
 
 void LineDrawer::descend(const DisparityPyramid& pyramid, int level, int x, int y, const Eigen::Isometry3d& T_W_C,
@@ -182,7 +184,7 @@ void LineDrawer::drawPyramid(const DisparityPyramid& min_pyramid, const Eigen::I
     for (int x = 0; x < min_pyramid.width(top); ++x) descend(min_pyramid, top, x, y, T_W_C, grid, stats);
 }
 
-void LineDrawer::descendBounded(const BoundedDescent& b, int level, int x, int y, double l_begin,
+void LineDrawer::descendBounded(const BoundedDescent& b, int level, int x, int y, double z_begin,
                                 DrawStatistics* stats) const {
   const float d = b.min_pyramid.at(level, x, y);
   ++stats->used_image_pixels;
@@ -196,31 +198,31 @@ void LineDrawer::descendBounded(const BoundedDescent& b, int level, int x, int y
   }
   if (at_bottom || (fine_enough && (level <= 0 || b.bound.isFaithful(d, d_max)))) {
     ++stats->coordinate_transfers;
-    stats->grid_cells_drawn += drawPixel(level, x, y, d, b.T_W_C, b.grid, l_begin);
+    stats->grid_cells_drawn += drawPixel(level, x, y, d, b.T_W_C, b.grid, z_begin);
     return;
   }
   // The block's rays lie within one cell of each other up to the depth
   // z_i = c·f / 2^i (eq. 12) and are free up to the nearest measurement's
   // front: one ray through the block's centre draws that stretch for all of
-  // them, its children's lines start where it ends.
+  // them, its children's lines start at the depth where it ends.
   const auto& cfg = camera_.config();
   const double X = DisparityPyramid::centreOf(level, x, cfg.width_px);
   const double Y = DisparityPyramid::centreOf(level, y, cfg.height_px);
-  const Eigen::Vector3d C_ray = camera_.rayThroughPixel(X, Y);
+  const Eigen::Vector3d C_ray = camera_.rayThroughPixel(X, Y);  // z = 1
   const double norm = C_ray.norm();
   const RangeProfile nearest = pixelProfile(camera_, table_, X, Y, d_max);
-  const double l_shared = std::min(b.cell_f_m_px * powerOfTwo(-level) * norm,
-                                   static_cast<double>(nearest.l_p_m + nearest.front_m));
-  if (l_shared > l_begin) {
+  const double z_shared = std::min(b.cell_f_m_px * powerOfTwo(-level),
+                                   static_cast<double>(nearest.l_p_m + nearest.front_m) / norm);
+  if (z_shared > z_begin) {
     ++stats->coordinate_transfers;
     stats->grid_cells_drawn += drawRay(b.T_W_C.translation(), b.T_W_C.linear() * (C_ray / norm),
-                                       table_.freeProfile(), b.grid, l_begin, l_shared);
-    l_begin = l_shared;
+                                       table_.freeProfile(), b.grid, z_begin * norm, z_shared * norm);
+    z_begin = z_shared;
   }
   const int w = b.min_pyramid.width(level - 1);
   const int h = b.min_pyramid.height(level - 1);
   for (int cy = 2 * y; cy <= 2 * y + 1 && cy < h; ++cy)
-    for (int cx = 2 * x; cx <= 2 * x + 1 && cx < w; ++cx) descendBounded(b, level - 1, cx, cy, l_begin, stats);
+    for (int cx = 2 * x; cx <= 2 * x + 1 && cx < w; ++cx) descendBounded(b, level - 1, cx, cy, z_begin, stats);
 }
 
 void LineDrawer::drawPyramidBounded(const DisparityPyramid& min_pyramid, const DisparityPyramid& max_pyramid,

@@ -174,13 +174,16 @@ void RayTracer::drawPyramidBounded(const DisparityPyramid& min_pyramid, const Di
             min_pyramid.topLevel() == max_pyramid.topLevel());
   const int top = max_pyramid.topLevel();
   const double half_cell_f = 0.5 * grid->resolution() * camera_.config().focal_length_px;
+  const int width0 = max_pyramid.width(0), height0 = max_pyramid.height(0);
   traverse(T_W_C, grid, stats, [&](const Eigen::Vector3d& C_p, double u, double v, DrawStatistics* st) {
     // Eq. 13's level: 2^i <= c·f/z, the footprint spans 2-3 blocks per axis.
     const int i = std::clamp(levels_.levelForDepth(C_p.z()), 0, top);
     // The footprint in pixel-edge coordinates: level-0 pixel k covers [k, k+1),
     // a level-j block b covers [b·2^j, (b+1)·2^j).
+    // Clipped to the image, so that a cell at the camera cannot overflow an int.
     const double r = half_cell_f / C_p.z();
-    const double x_lo = u + 0.5 - r, x_hi = u + 0.5 + r, y_lo = v + 0.5 - r, y_hi = v + 0.5 + r;
+    const double x_lo = std::max(u + 0.5 - r, 0.0), x_hi = std::min(u + 0.5 + r, static_cast<double>(width0));
+    const double y_lo = std::max(v + 0.5 - r, 0.0), y_hi = std::min(v + 0.5 + r, static_cast<double>(height0));
     // Block b of level j spans [b·2^j, (b+1)·2^j); does it overlap [lo, hi)?
     auto overlaps = [](int b, int j, double lo, double hi) {
       return static_cast<double>(b << j) < hi && static_cast<double>((b + 1) << j) > lo;
@@ -224,11 +227,17 @@ void RayTracer::drawPyramidBounded(const DisparityPyramid& min_pyramid, const Di
       int bx, by;
     };
     std::array<Block, 16> blocks;
+    if ((bx1 - bx0 + 1) * (by1 - by0 + 1) > static_cast<int>(blocks.size())) {
+      // Only near cells whose level was clamped to the top: every block, in order.
+      for (int by = by0; by <= by1; ++by)
+        for (int bx = bx0; bx <= bx1; ++bx) visit(visit, i, bx, by);
+      return m;
+    }
     int n = 0;
     const cv::Mat& level_i = max_pyramid.level(i);
     for (int by = by0; by <= by1; ++by) {
       const float* row = level_i.ptr<float>(by);
-      for (int bx = bx0; bx <= bx1 && n < static_cast<int>(blocks.size()); ++bx) blocks[n++] = {row[bx], bx, by};
+      for (int bx = bx0; bx <= bx1; ++bx) blocks[n++] = {row[bx], bx, by};
     }
     st->used_image_pixels += static_cast<uint64_t>(n);
     if (n == 0) return m;

@@ -80,11 +80,16 @@ class DisparityMapper : public nodelet::Nodelet {
   /// Draws one image (CV_32FC1 disparity) and publishes the update.
   void process(const cv::Mat& disparity, const std_msgs::Header& header, const StereoCameraConfig& camera);
 
-  DisparityMapperParameters params_;
+  /// A copy of the parameters in use (dynamic_reconfigure changes them under mutex_).
+  DisparityMapperParameters parameters() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return params_;
+  }
 
   // Everything below is guarded by mutex_: a nodelet's callbacks may run on
   // several threads of the manager's pool at once.
-  std::mutex mutex_;
+  mutable std::mutex mutex_;
+  DisparityMapperParameters params_;
   std::unique_ptr<DisparityDrawer> drawer_;  ///< rebuilt when the camera or drawing config changes
   LocalGrid grid_;
   GridUpdate update_;
@@ -202,9 +207,9 @@ void DisparityMapper::reconfigure(DisparityMapperConfig& config, uint32_t /*leve
   // The server clamps each value to its range in the .cfg; cross-checks
   // (min_range_m < max_range_m, ...) and the algorithm's name are ours. A
   // refused request leaves the values in use, and the server shows those.
+  std::lock_guard<std::mutex> lock(mutex_);
   DisparityMapperParameters next = params_;
   std::string why;
-  std::lock_guard<std::mutex> lock(mutex_);
   if (!parseDrawingAlgorithm(config.algorithm, &next.drawing.algorithm)) {
     NODELET_WARN("dynamic_reconfigure: algorithm must be one of %s (got '%s'); keeping the previous values",
                  drawingAlgorithmNames().c_str(), config.algorithm.c_str());
@@ -244,7 +249,7 @@ void DisparityMapper::transformFailure(const boost::shared_ptr<const M>& msg, tf
     last_problem_ = std::string("dropped an image: ") + what;
   }
   NODELET_WARN_THROTTLE(5.0, "dropped an image from '%s' at %.3f: %s (to '%s')", msg->header.frame_id.c_str(),
-                        msg->header.stamp.toSec(), what, params_.world_frame.c_str());
+                        msg->header.stamp.toSec(), what, parameters().world_frame.c_str());
 }
 
 template <class M>
@@ -282,13 +287,14 @@ void DisparityMapper::refuse(const char* what, const std::string& why) {
 
 void DisparityMapper::disparityCallback(const stereo_msgs::DisparityImageConstPtr& msg) {
   const sensor_msgs::CameraInfoConstPtr info = noteImage();
+  const DisparityMapperParameters params = parameters();  // dynamic_reconfigure may change them meanwhile
   auto refuse = [this](const std::string& why) { this->refuse("disparity image", why); };
   if (msg->image.encoding != sensor_msgs::image_encodings::TYPE_32FC1)
     return refuse("encoding '" + msg->image.encoding + "', expected 32FC1");
   std::string why;
-  if (!checkImageLayout(msg->image, static_cast<uint64_t>(params_.max_image_pixels), &why)) return refuse(why);
+  if (!checkImageLayout(msg->image, static_cast<uint64_t>(params.max_image_pixels), &why)) return refuse(why);
   StereoCameraConfig camera;
-  if (!cameraFromDisparityImage(*msg, info.get(), params_, &camera, &why)) return refuse(why);
+  if (!cameraFromDisparityImage(*msg, info.get(), params, &camera, &why)) return refuse(why);
   cv_bridge::CvImageConstPtr image;
   try {
     image = cv_bridge::toCvShare(msg->image, msg);  // a view of the message's data, no copy
@@ -302,13 +308,14 @@ void DisparityMapper::disparityCallback(const stereo_msgs::DisparityImageConstPt
 
 void DisparityMapper::depthCallback(const sensor_msgs::ImageConstPtr& msg) {
   const sensor_msgs::CameraInfoConstPtr info = noteImage();
+  const DisparityMapperParameters params = parameters();
   auto refuse = [this](const std::string& why) { this->refuse("depth image", why); };
   if (!info) return refuse("no camera_info received yet");
   if (info->width != msg->width || info->height != msg->height) return refuse("camera_info size differs");
   std::string why;
-  if (!checkImageLayout(*msg, static_cast<uint64_t>(params_.max_image_pixels), &why)) return refuse(why);
+  if (!checkImageLayout(*msg, static_cast<uint64_t>(params.max_image_pixels), &why)) return refuse(why);
   StereoCameraConfig camera;
-  if (!cameraFromDepthInfo(*info, params_, &camera, &why)) return refuse(why);
+  if (!cameraFromDepthInfo(*info, params, &camera, &why)) return refuse(why);
   cv::Mat disparity;
   try {
     const cv_bridge::CvImageConstPtr depth = cv_bridge::toCvShare(msg);
@@ -323,8 +330,9 @@ void DisparityMapper::process(const cv::Mat& disparity, const std_msgs::Header& 
                               const StereoCameraConfig& camera) {
   // The image waited in the tf filter until its pose was known; a pose that
   // came more than tf_timeout_s after the image makes it too old to use.
+  const DisparityMapperParameters params = parameters();
   const double age_s = (ros::Time::now() - header.stamp).toSec();
-  if (params_.tf_timeout_s > 0.0 && age_s > params_.tf_timeout_s) {
+  if (params.tf_timeout_s > 0.0 && age_s > params.tf_timeout_s) {
     std::lock_guard<std::mutex> lock(mutex_);
     ++dropped_no_transform_;
     last_problem_ = "transform came " + std::to_string(age_s) + " s after the image (tf_timeout_s)";
@@ -333,7 +341,7 @@ void DisparityMapper::process(const cv::Mat& disparity, const std_msgs::Header& 
   }
   geometry_msgs::TransformStamped transform;
   try {
-    transform = tf_buffer_->lookupTransform(params_.world_frame, header.frame_id, header.stamp);
+    transform = tf_buffer_->lookupTransform(params.world_frame, header.frame_id, header.stamp);
   } catch (const tf2::TransformException& e) {
     std::lock_guard<std::mutex> lock(mutex_);
     ++dropped_no_transform_;

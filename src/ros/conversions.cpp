@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <map>
 #include <sstream>
 
@@ -35,6 +36,28 @@ bool checkImageLayout(const sensor_msgs::Image& image, uint64_t max_pixels, std:
     return fail("image size and data do not fit together (" + std::to_string(image.data.size()) + " bytes for " +
                 std::to_string(image.height) + " rows of " + std::to_string(image.step) + ")");
   return true;
+}
+
+void toDisparityImageMsg(const cv::Mat& disparity, const std_msgs::Header& header, const StereoCameraConfig& camera,
+                         double max_disparity_px, double delta_d_px, stereo_msgs::DisparityImage* msg) {
+  CV_Assert(disparity.type() == CV_32FC1);
+  msg->header = header;
+  msg->image.header = header;
+  msg->image.width = disparity.cols;
+  msg->image.height = disparity.rows;
+  msg->image.encoding = sensor_msgs::image_encodings::TYPE_32FC1;
+  msg->image.is_bigendian = false;
+  msg->image.step = disparity.cols * sizeof(float);
+  msg->image.data.resize(static_cast<size_t>(msg->image.step) * disparity.rows);
+  for (int y = 0; y < disparity.rows; ++y)
+    std::memcpy(&msg->image.data[static_cast<size_t>(y) * msg->image.step], disparity.ptr<float>(y), msg->image.step);
+  msg->f = static_cast<float>(camera.focal_length_px);
+  msg->T = static_cast<float>(camera.baseline_m);
+  msg->min_disparity = 0.0f;
+  msg->max_disparity = static_cast<float>(max_disparity_px);
+  msg->delta_d = static_cast<float>(delta_d_px);
+  msg->valid_window.width = disparity.cols;
+  msg->valid_window.height = disparity.rows;
 }
 
 bool cameraFromDisparityImage(const stereo_msgs::DisparityImage& msg, const sensor_msgs::CameraInfo* info,

@@ -164,15 +164,23 @@ int main(int argc, char** argv) {
 
     for (const rosbag::MessageInstance& m : view) {
       if (m.getTopic() == "/tf" || m.getTopic() == "/tf_static") {
-        const auto msg = m.instantiate<tf2_msgs::TFMessage>();
-        if (!msg) continue;
-        for (const auto& t : msg->transforms) {
-          tf.setTransform(t, "bag", m.getTopic() == "/tf_static");
-          if (t.header.stamp > latest_tf) latest_tf = t.header.stamp;
+        try {  // a broken message, or a transform tf2 refuses, is skipped
+          const auto msg = m.instantiate<tf2_msgs::TFMessage>();
+          if (!msg) continue;
+          for (const auto& t : msg->transforms) {
+            if (!tf.setTransform(t, "bag", m.getTopic() == "/tf_static")) continue;
+            if (t.header.stamp > latest_tf) latest_tf = t.header.stamp;
+          }
+        } catch (const std::exception& e) {
+          std::cerr << "\nbag_to_map: skipped a message on " << m.getTopic() << ": " << e.what() << std::endl;
         }
         mapPending(false);
       } else if (m.getTopic() == info_topic) {
-        info = m.instantiate<sensor_msgs::CameraInfo>();
+        try {
+          info = m.instantiate<sensor_msgs::CameraInfo>();
+        } catch (const std::exception& e) {
+          std::cerr << "\nbag_to_map: skipped a message on " << m.getTopic() << ": " << e.what() << std::endl;
+        }
       } else if (m.getTopic() == image_topic) {
         ++read;
         Image im;

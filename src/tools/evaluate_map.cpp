@@ -37,7 +37,7 @@ int run(int argc, char** argv) {
       scenario_name = tools::nextValue(argc, argv, &i);
     } else if (a == "--max-range") {
       max_range = tools::parseNumber(a, tools::nextValue(argc, argv, &i));
-      if (!(max_range > 0.0)) throw tools::UsageError("--max-range must be > 0");
+      if (!(max_range > 0.0 && max_range <= 200.0)) throw tools::UsageError("--max-range must be in (0, 200] m");
     } else if (a == "--views") {
       views_prefix = tools::nextValue(argc, argv, &i);
     } else if (a == "--frames") {

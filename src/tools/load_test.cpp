@@ -14,7 +14,6 @@
 #include <dirent.h>
 
 #include <algorithm>
-#include <cstring>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
@@ -125,18 +124,11 @@ int run(int argc, char** argv) {
   for (size_t k = 0; k < static_cast<size_t>(frames); ++k) {
     const size_t i = (k * step) % flight.T_W_B.size();
     const cv::Mat d = so::renderStereoFrame(flight, i, 1);
+    std_msgs::Header header;
+    header.frame_id = "camera_optical";
     stereo_msgs::DisparityImage m;
-    m.header.frame_id = "camera_optical";
-    m.image.width = d.cols;
-    m.image.height = d.rows;
-    m.image.encoding = "32FC1";
-    m.image.step = d.cols * 4;
-    m.image.data.resize(d.total() * 4);
-    std::memcpy(m.image.data.data(), d.data, m.image.data.size());
-    m.f = static_cast<float>(flight.camera.focal_length_px);
-    m.T = static_cast<float>(flight.camera.baseline_m);
-    m.max_disparity = static_cast<float>(flight.effects.max_search_disparity_px * scale);
-    m.delta_d = static_cast<float>(flight.effects.subpixel_step_px);
+    so::toDisparityImageMsg(d, header, flight.camera, flight.effects.max_search_disparity_px * scale,
+                            flight.effects.subpixel_step_px, &m);
     images.push_back(m);
     poses.push_back(flight.cameraPose(i));
   }
@@ -164,7 +156,7 @@ int run(int argc, char** argv) {
     ros::WallDuration(0.05).sleep();
   if (pub.getNumSubscribers() == 0) throw std::runtime_error("nobody subscribes to " + disparity_topic);
 
-  // Warm-up (tables, first allocations), then the measured run.
+  // The measured run (the first second includes the nodelets' first allocations).
   std::vector<double> rss_mib;
   const double rss_start = residentMiB(manager_pid);
   ros::WallRate rate(rate_hz);
@@ -211,6 +203,8 @@ int run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  ros::init(argc, argv, "load_test", ros::init_options::AnonymousName);
-  return tools::runTool("load_test", [&] { return run(argc, argv); });
+  return tools::runTool("load_test", [&] {
+    ros::init(argc, argv, "load_test", ros::init_options::AnonymousName);
+    return run(argc, argv);
+  });
 }

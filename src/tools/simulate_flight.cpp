@@ -85,23 +85,11 @@ int run(int argc, char** argv) {
     bag.write("/tf", stamp, tf);
 
     const cv::Mat d = so::renderStereoFrame(s, i, seed);
+    std_msgs::Header header;
+    header.stamp = stamp;
+    header.frame_id = "camera_optical";
     stereo_msgs::DisparityImage msg;
-    msg.header.stamp = stamp;
-    msg.header.frame_id = "camera_optical";
-    msg.image.header = msg.header;
-    msg.image.width = d.cols;
-    msg.image.height = d.rows;
-    msg.image.encoding = "32FC1";
-    msg.image.step = d.cols * 4;
-    msg.image.data.resize(d.total() * 4);
-    std::memcpy(msg.image.data.data(), d.data, msg.image.data.size());
-    msg.f = static_cast<float>(s.camera.focal_length_px);
-    msg.T = static_cast<float>(s.camera.baseline_m);
-    msg.min_disparity = 0.0f;
-    msg.max_disparity = static_cast<float>(s.effects.max_search_disparity_px);
-    msg.delta_d = static_cast<float>(s.effects.subpixel_step_px);
-    msg.valid_window.width = d.cols;
-    msg.valid_window.height = d.rows;
+    so::toDisparityImageMsg(d, header, s.camera, s.effects.max_search_disparity_px, s.effects.subpixel_step_px, &msg);
     bag.write("/stereo/disparity", stamp + ros::Duration(0.001), msg);
     if (true_depth) {
       cv::Mat depth;

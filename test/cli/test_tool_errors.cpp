@@ -122,19 +122,11 @@ TEST(ToolErrors, BagToMapSkipsHostileImages) {
       tf.transforms.push_back(so::toTransformMsg(T_W_C, t0 + ros::Duration(0.1 * k), "map", "camera_optical"));
     bag.write("/tf", t0, tf);
     auto good = [&](int k) {
+      std_msgs::Header header;
+      header.stamp = t0 + ros::Duration(0.1 * k);
+      header.frame_id = "camera_optical";
       stereo_msgs::DisparityImage m;
-      m.header.stamp = t0 + ros::Duration(0.1 * k);
-      m.header.frame_id = "camera_optical";
-      m.image.header = m.header;
-      m.image.width = image.cols;
-      m.image.height = image.rows;
-      m.image.encoding = "32FC1";
-      m.image.step = image.cols * 4;
-      m.image.data.resize(image.total() * 4);
-      std::memcpy(m.image.data.data(), image.data, m.image.data.size());
-      m.f = 700.0f;
-      m.T = 0.3f;
-      m.max_disparity = 128.0f;
+      so::toDisparityImageMsg(image, header, camera.config(), 128.0, 1.0 / 16.0, &m);
       return m;
     };
     std::vector<stereo_msgs::DisparityImage> msgs;

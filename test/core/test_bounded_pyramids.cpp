@@ -5,6 +5,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
+#include <limits>
+#include <vector>
 
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/synthetic_scene.h"
@@ -38,7 +41,7 @@ ObstacleCells drawAndInspect(DrawingAlgorithm algorithm, const cv::Mat& disparit
   auto value = [&](Eigen::Vector3i global) {
     const Eigen::Vector3i local = global - grid.originIndex();
     EXPECT_TRUE(grid.contains(local));
-    return grid.at(local.x(), local.y(), local.z());
+    return grid.contains(local) ? grid.at(local.x(), local.y(), local.z()) : LocalGrid::kUnknown;
   };
   for (int z = lo.z(); z <= hi.z(); ++z)
     for (int y = lo.y(); y <= hi.y(); ++y)
@@ -57,6 +60,29 @@ ObstacleCells drawAndInspect(DrawingAlgorithm algorithm, const cv::Mat& disparit
 }
 
 Eigen::Vector3i cellOf(const Eigen::Vector3d& p) { return LocalGrid::globalIndex(p, kCell); }
+
+/// Per-pixel line drawing finds all @p cells of the obstacle; so does the
+/// bounded pyramid, and it draws none of them free.
+void expectKept(const ObstacleCells& plain, const ObstacleCells& bounded, int cells) {
+  EXPECT_EQ(plain.occupied, cells);
+  EXPECT_EQ(bounded.cells, cells);
+  EXPECT_EQ(bounded.occupied, cells);
+  EXPECT_EQ(bounded.free, 0);
+}
+
+/// Ray tracing finds all @p cells; the bounded pyramid too, without calling
+/// more cells beside the obstacle occupied than plain ray tracing, where the
+/// paper's pyramid does.
+void expectNotEnlarged(const char* what, const ObstacleCells& plain, const ObstacleCells& paper,
+                       const ObstacleCells& bounded, int cells) {
+  EXPECT_EQ(plain.occupied, cells);
+  EXPECT_EQ(bounded.occupied, cells);
+  EXPECT_EQ(bounded.free, 0);
+  EXPECT_GT(paper.beside_occupied, 0);  // the 2x2 window of a coarse level reaches the neighbours
+  EXPECT_LE(bounded.beside_occupied, plain.beside_occupied);
+  std::printf("%s: cells beside it called occupied: raytrace %d, raytrace_pyramid %d, bounded %d\n", what,
+              plain.beside_occupied, paper.beside_occupied, bounded.beside_occupied);
+}
 
 /// Camera 2 m above ground level looking along +x (no ground in these scenes).
 Eigen::Isometry3d camera() { return lookingAlongX(Eigen::Vector3d(0.0, 0.0, 2.0)); }
@@ -86,25 +112,12 @@ TEST_F(PostBeforeWall, PaperLinePyramidLosesThePost) {
 }
 
 TEST_F(PostBeforeWall, BoundedLinePyramidKeepsThePost) {
-  const ObstacleCells plain = inspect(DrawingAlgorithm::kLine);
-  const ObstacleCells bounded = inspect(DrawingAlgorithm::kLinePyramidBounded);
-  EXPECT_EQ(plain.occupied, 8);
-  EXPECT_EQ(bounded.cells, 8);
-  EXPECT_EQ(bounded.occupied, 8);
-  EXPECT_EQ(bounded.free, 0);
+  expectKept(inspect(DrawingAlgorithm::kLine), inspect(DrawingAlgorithm::kLinePyramidBounded), 8);
 }
 
 TEST_F(PostBeforeWall, BoundedRayTracingDoesNotEnlargeThePost) {
-  const ObstacleCells plain = inspect(DrawingAlgorithm::kRayTrace);
-  const ObstacleCells paper = inspect(DrawingAlgorithm::kRayTracePyramid);
-  const ObstacleCells bounded = inspect(DrawingAlgorithm::kRayTracePyramidBounded);
-  EXPECT_EQ(plain.occupied, 8);
-  EXPECT_EQ(bounded.occupied, 8);
-  EXPECT_EQ(bounded.free, 0);
-  EXPECT_GT(paper.beside_occupied, 0);  // the 2x2 window of level 4 reaches the neighbours
-  EXPECT_LE(bounded.beside_occupied, plain.beside_occupied);
-  std::printf("post: cells beside it called occupied: raytrace %d, raytrace_pyramid %d, bounded %d\n",
-              plain.beside_occupied, paper.beside_occupied, bounded.beside_occupied);
+  expectNotEnlarged("post", inspect(DrawingAlgorithm::kRayTrace), inspect(DrawingAlgorithm::kRayTracePyramid),
+                    inspect(DrawingAlgorithm::kRayTracePyramidBounded), 8);
 }
 
 class WireAgainstSky : public ::testing::Test {
@@ -131,25 +144,12 @@ TEST_F(WireAgainstSky, PaperLinePyramidLosesTheWire) {
 }
 
 TEST_F(WireAgainstSky, BoundedLinePyramidKeepsTheWire) {
-  const ObstacleCells plain = inspect(DrawingAlgorithm::kLine);
-  const ObstacleCells bounded = inspect(DrawingAlgorithm::kLinePyramidBounded);
-  EXPECT_EQ(plain.occupied, 28);
-  EXPECT_EQ(bounded.cells, 28);
-  EXPECT_EQ(bounded.occupied, 28);
-  EXPECT_EQ(bounded.free, 0);
+  expectKept(inspect(DrawingAlgorithm::kLine), inspect(DrawingAlgorithm::kLinePyramidBounded), 28);
 }
 
 TEST_F(WireAgainstSky, BoundedRayTracingDoesNotEnlargeTheWire) {
-  const ObstacleCells plain = inspect(DrawingAlgorithm::kRayTrace);
-  const ObstacleCells paper = inspect(DrawingAlgorithm::kRayTracePyramid);
-  const ObstacleCells bounded = inspect(DrawingAlgorithm::kRayTracePyramidBounded);
-  EXPECT_EQ(plain.occupied, 28);
-  EXPECT_EQ(bounded.occupied, 28);
-  EXPECT_EQ(bounded.free, 0);
-  EXPECT_GT(paper.beside_occupied, 0);  // the max pyramid thickens the wire
-  EXPECT_LE(bounded.beside_occupied, plain.beside_occupied);
-  std::printf("wire: cells beside it called occupied: raytrace %d, raytrace_pyramid %d, bounded %d\n",
-              plain.beside_occupied, paper.beside_occupied, bounded.beside_occupied);
+  expectNotEnlarged("wire", inspect(DrawingAlgorithm::kRayTrace), inspect(DrawingAlgorithm::kRayTracePyramid),
+                    inspect(DrawingAlgorithm::kRayTracePyramidBounded), 28);
 }
 
 /// The bound itself: a nearer measurement must lie where the far line's
@@ -180,6 +180,62 @@ TEST(DisparityBlockBound, FaithfulWhereTheFarProfileIsOccupied) {
   EXPECT_FALSE(bound.isFaithful(0.0f, d(10.0)));    // the wire against the sky
   EXPECT_FALSE(bound.isFaithful(0.0f, d(24.9)));
   EXPECT_TRUE(bound.isFaithful(d(25.5), d(24.9)));  // the ground across the range limit
+}
+
+}  // namespace
+
+namespace {
+
+/// The bound for a camera whose disparities reach far above its table: the
+/// table stops at DisparityBlockBound::kMaxTabulatedPx, beyond it one cell.
+TEST(DisparityBlockBound, BeyondTheTableOneCell) {
+  StereoCameraConfig config;
+  config.focal_length_px = 1e5;  // bf = 1e6 px·m: disparities up to 2e6 px at 0.5 m
+  config.baseline_m = 10.0;
+  const StereoCameraModel cam(config);
+  const InverseSensorModel model{InverseSensorModelConfig()};
+  const DisparityBlockBound bound(cam, model, kCell);
+  const float d_min = 50000.0f;  // z = 20 m, far above the table
+  EXPECT_NEAR(bound.maxNearDisparity(d_min), 50000.0 * 1e6 / (1e6 - kCell * 50000.0), 0.1);  // 50632.9
+  EXPECT_TRUE(bound.isFaithful(d_min, 50600.0f));
+  EXPECT_FALSE(bound.isFaithful(d_min, 50700.0f));
+}
+
+/// Cells so near the camera that their footprint spans more top-level blocks
+/// than the bounded ray tracer sorts (40 blocks of 64 px at 0.1 m with 5 cm
+/// cells, at most 16 sorted): all blocks still count. Upper half of the image unmatched, lower
+/// half a wall at 3 m, so a cell whose footprint reaches the lower half is
+/// free, whatever the order of its blocks.
+TEST(BoundedRayTracing, NearCellsSeeEveryBlockOfTheirFootprint) {
+  StereoCameraConfig config;
+  config.max_range_m = 5.0;  // a small grid at 5 cm
+  const StereoCameraModel cam(config);
+  cv::Mat image(480, 640, CV_32FC1, cv::Scalar(static_cast<float>(cam.disparityFromDepth(3.0))));
+  image.rowRange(0, 240).setTo(std::numeric_limits<float>::quiet_NaN());
+  const Eigen::Isometry3d T_W_C = lookingAlongX(Eigen::Vector3d(0.0, 0.0, 2.0));
+  DrawingConfig drawing;
+  drawing.algorithm = DrawingAlgorithm::kRayTracePyramidBounded;
+  drawing.resolution_m = 0.05;
+  DisparityDrawer drawer(config, drawing);
+  LocalGrid grid;
+  drawer.draw(image, T_W_C, &grid);
+  size_t near_cells = 0, free_cells = 0;
+  for (int z = 0; z < grid.size().z(); ++z)
+    for (int y = 0; y < grid.size().y(); ++y)
+      for (int x = 0; x < grid.size().x(); ++x) {
+        const Eigen::Vector3d C_p = T_W_C.inverse() * grid.cellCentre(x, y, z);
+        if (C_p.z() < 0.05 || C_p.z() > 0.15) continue;
+        const double u = config.focal_length_px * C_p.x() / C_p.z() + config.cx_px;
+        const double v = config.focal_length_px * C_p.y() / C_p.z() + config.cy_px;
+        if (u < 0.0 || u > 639.0 || v < 0.0 || v > 479.0) continue;
+        const double r = 0.5 * 0.05 * config.focal_length_px / C_p.z();
+        if (v + 0.5 + r < 250.0) continue;  // the footprint stays in the unmatched half
+        ++near_cells;
+        const float value = grid.at(x, y, z);
+        free_cells += value < 0.0f && value != LocalGrid::kUnknown;
+      }
+  EXPECT_GE(near_cells, 3u);  // the frustum is a few cells wide there
+  EXPECT_EQ(free_cells, near_cells);
 }
 
 }  // namespace

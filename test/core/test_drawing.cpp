@@ -249,6 +249,50 @@ TEST_F(LineDrawing, ObstaclePriority) {
   EXPECT_NEAR(a.at(far.x(), far.y(), far.z()), model.freeLogOdds(), 1e-5);
 }
 
+// A segment [l_begin, l_stop] of a line (the bounded pyramid's shared free
+// stretch and the lines of its children) draws exactly the cells of the whole
+// line whose slab centre planes lie inside it, with the same values.
+TEST_F(LineDrawing, SegmentsDrawThePartOfTheLine) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0), range(2.0, 24.0), cut(0.0, 1.0);
+  for (int trial = 0; trial < 12; ++trial) {
+    const Eigen::Vector3d origin(u(rng), u(rng), u(rng));
+    const Eigen::Vector3d dir = Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized();
+    const double lp = range(rng);
+    const RangeProfile profile =
+        trial % 4 == 0 ? table.freeProfile() : table.profile(static_cast<float>(lp), cam.depthUncertainty(lp));
+    const double l_end = std::min<double>(profile.endRange(), 25.0);
+    const double l_begin = cut(rng) * l_end, l_stop = l_begin + cut(rng) * (l_end - l_begin);
+    LocalGrid whole, part;
+    whole.reset(Eigen::Vector3i(-110, -110, -110), Eigen::Vector3i(220, 220, 220), 0.25);
+    part = whole;
+    drawer.drawRay(origin, dir, profile, &whole);
+    const uint64_t n = drawer.drawRay(origin, dir, profile, &part, l_begin, l_stop);
+    ASSERT_EQ(part.countKnown(), n);
+    int m = 0;
+    dir.cwiseAbs().maxCoeff(&m);
+    size_t inner = 0, off_line = 0;
+    for (size_t i = 0; i < part.numCells(); ++i) {
+      const int x = static_cast<int>(i % 220), y = static_cast<int>(i / 220 % 220), z = static_cast<int>(i / 48400);
+      const double l = (part.cellCentre(x, y, z)[m] - origin[m]) / dir[m];  // the slab's centre plane
+      if (l > l_begin + 0.01 && l < l_stop - 0.01 && whole.data()[i] != LocalGrid::kUnknown) {
+        // Every inner cell, with the same value (the runs accumulate in float from another start).
+        ASSERT_NEAR(part.data()[i], whole.data()[i], 1e-4) << "trial " << trial << " l " << l;
+        ++inner;
+      }
+      if (part.data()[i] == LocalGrid::kUnknown) continue;
+      // Only the first and the last slab sample the segment's ends instead of
+      // the centre plane, so only their cells may lie off the whole line.
+      ASSERT_GT(l, l_begin - 0.25 * 1.8) << "trial " << trial;
+      ASSERT_LT(l, l_stop + 0.25 * 1.8) << "trial " << trial;
+      off_line += whole.data()[i] == LocalGrid::kUnknown;
+    }
+    EXPECT_LE(off_line, 2u) << "trial " << trial;
+    EXPECT_GE(n, inner);
+    EXPECT_LE(n, inner + 2);
+  }
+}
+
 // Every cell of a line gets L̂ at the range where the ray crosses the cell's
 // centre plane along the major axis (the fast runs of drawRay agree with the
 // table's plain look-up).

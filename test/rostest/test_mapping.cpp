@@ -78,20 +78,10 @@ class MappingTest : public ::testing::Test {
                                                             const cv::Mat& image = cv::Mat()) {
     const cv::Mat& img = image.empty() ? image_ : image;
     auto msg = boost::make_shared<stereo_msgs::DisparityImage>();
-    msg->header.stamp = stamp;
-    msg->header.frame_id = frame;
-    msg->image.header = msg->header;
-    msg->image.width = img.cols;
-    msg->image.height = img.rows;
-    msg->image.encoding = "32FC1";
-    msg->image.step = img.cols * 4;
-    msg->image.data.resize(img.total() * 4);
-    std::memcpy(msg->image.data.data(), img.data, msg->image.data.size());
-    msg->f = 700.0f;
-    msg->T = 0.3f;
-    msg->min_disparity = 0.0f;
-    msg->max_disparity = 128.0f;
-    msg->delta_d = 1.0f / 16.0f;
+    std_msgs::Header header;
+    header.stamp = stamp;
+    header.frame_id = frame;
+    toDisparityImageMsg(img, header, StereoCameraConfig(), 128.0, 1.0 / 16.0, msg.get());
     return msg;
   }
 

@@ -42,6 +42,12 @@ bool cameraFromDepthInfo(const sensor_msgs::CameraInfo& info, const DisparityMap
 /// if it is not finite or its quaternion is not of unit norm (±1e-3).
 bool poseFromTransform(const geometry_msgs::TransformStamped& transform, Eigen::Isometry3d* T_W_C);
 
+/// A stereo_msgs/DisparityImage holding a copy of a CV_32FC1 disparity image
+/// [px], with the camera's f and b, a matcher's search range [0, max] and its
+/// disparity step delta_d (as stereo_image_proc fills them).
+void toDisparityImageMsg(const cv::Mat& disparity, const std_msgs::Header& header, const StereoCameraConfig& camera,
+                         double max_disparity_px, double delta_d_px, stereo_msgs::DisparityImage* msg);
+
 /// A tf2 transform message of the pose T (child frame in the parent frame).
 geometry_msgs::TransformStamped toTransformMsg(const Eigen::Isometry3d& T, const ros::Time& stamp,
                                                const std::string& parent, const std::string& child);
