@@ -163,7 +163,17 @@ TEST(MapAccumulator, KillDuringSaveLeavesThePreviousMapIntact) {
     if (child == 0) {
       for (;;) map.save(dir, "kill_map");  // saves until killed
     }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20 + 37 * trial));
+    // Kill as soon as a temporary file shows that a write is under way (plus
+    // a little more each trial, to land at other points of the write).
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+    auto writing = [&] {
+      for (const auto& p : paths)
+        if (access((p + ".tmp" + std::to_string(child)).c_str(), F_OK) == 0) return true;
+      return false;
+    };
+    while (!writing() && std::chrono::steady_clock::now() < give_up)
+      std::this_thread::sleep_for(std::chrono::microseconds(100));
+    std::this_thread::sleep_for(std::chrono::microseconds(300 * trial));
     ASSERT_EQ(kill(child, SIGKILL), 0);
     int status = 0;
     ASSERT_EQ(waitpid(child, &status, 0), child);
