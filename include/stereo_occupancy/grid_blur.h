@@ -59,6 +59,7 @@ class DistanceDependentBlur {
   BlurConfig config_;
   std::vector<std::vector<float>> kernels_;
   std::vector<uint8_t> kernel_index_;
+  std::vector<uint8_t> line_nonzero_;  ///< per line of a pass: holds a non-zero input
   std::vector<float> buffer_a_;
   std::vector<float> buffer_b_;
 };
