@@ -49,7 +49,8 @@ q() { echo "$quality" | sed -n "s/.*\"$1\": \([0-9.e+-]*\).*/\1/p"; }
 pct() { awk -v v="$1" 'BEGIN { printf "%.1f %%", 100 * v }'; }
 
 echo
-echo "stereo_occupancy demo: scenario '$scenario' (seed $seed), pyramidal line drawing at 0.25 m, 25 m range"
+algorithm="$(echo "$summary" | sed -n 's/.*algorithm=\([a-z_]*\).*/\1/p')"
+echo "stereo_occupancy demo: scenario '$scenario' (seed $seed), $algorithm at $(field resolution_m) m, 25 m range"
 echo "  frames:       $(field images_received) received, $(field images_processed) mapped, $(field dropped_no_transform) dropped (no pose), $(field dropped_invalid) refused"
 echo "  ms per frame: $(field ms_per_image_mean) mean, $(field ms_per_image_median) median, $(field ms_per_image_p99) p99, $(field ms_per_image_max) max (draw + blur + encode + publish)"
 echo "  map quality against the ground truth (within one cell):"

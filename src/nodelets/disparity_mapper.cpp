@@ -197,10 +197,11 @@ DisparityMapper::~DisparityMapper() {
   // blur, encode, publish). On stderr: rosconsole may be gone at shutdown.
   std::fprintf(stderr, "DisparityMapper summary: images_received=%lu images_processed=%lu dropped_no_transform=%lu "
            "dropped_invalid=%lu ms_per_image_mean=%.3f ms_per_image_median=%.3f ms_per_image_p99=%.3f "
-           "ms_per_image_max=%.3f\n",
+           "ms_per_image_max=%.3f algorithm=%s resolution_m=%.2f\n",
            static_cast<unsigned long>(images_received_), static_cast<unsigned long>(images_processed_),
            static_cast<unsigned long>(dropped_no_transform_), static_cast<unsigned long>(dropped_invalid_), mean,
-           ms[ms.size() / 2], ms[std::min(ms.size() - 1, ms.size() * 99 / 100)], ms.back());
+           ms[ms.size() / 2], ms[std::min(ms.size() - 1, ms.size() * 99 / 100)], ms.back(),
+           toString(params_.drawing.algorithm), params_.drawing.resolution_m);
 }
 
 void DisparityMapper::reconfigure(DisparityMapperConfig& config, uint32_t /*level*/) {
