@@ -77,12 +77,7 @@ int run(int argc, char** argv) {
       throw tools::UsageError("unknown option '" + a + "'");
     }
   }
-  so::FlightScenario scenario;
-  try {
-    scenario = so::makeScenario(scenario_name);
-  } catch (const std::invalid_argument& e) {
-    throw tools::UsageError(e.what());
-  }
+  so::FlightScenario scenario = tools::scenarioNamed(scenario_name);
   // Only every frame_step-th frame is mapped (OctoMap takes seconds a frame).
   std::vector<Eigen::Isometry3d> poses;
   std::vector<cv::Mat> images;

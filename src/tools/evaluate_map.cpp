@@ -47,12 +47,7 @@ int run(int argc, char** argv) {
     }
   }
   if (map_path.empty() || scenario_name.empty()) throw tools::UsageError("--map and --scenario are required");
-  so::FlightScenario scenario;
-  try {
-    scenario = so::makeScenario(scenario_name);
-  } catch (const std::invalid_argument& e) {
-    throw tools::UsageError(e.what());
-  }
+  so::FlightScenario scenario = tools::scenarioNamed(scenario_name);
   std::unique_ptr<octomap::OcTree> map;
   if (map_path.size() > 3 && map_path.substr(map_path.size() - 3) == ".bt") {
     map = std::make_unique<octomap::OcTree>(0.1);

@@ -50,12 +50,7 @@ int run(int argc, char** argv) {
     else throw tools::UsageError("unknown option '" + a + "'");
   }
   if (scenario_name.empty() || output.empty()) throw tools::UsageError("--scenario and --output are required");
-  so::FlightScenario s;
-  try {
-    s = so::makeScenario(scenario_name);
-  } catch (const std::invalid_argument& e) {
-    throw tools::UsageError(e.what());
-  }
+  so::FlightScenario s = tools::scenarioNamed(scenario_name);
   const size_t n = frames > 0 ? std::min<size_t>(frames, s.T_W_B.size()) : s.T_W_B.size();
   rosbag::Bag bag(output, rosbag::bagmode::Write);
   bag.setCompression(rosbag::compression::LZ4);

@@ -11,6 +11,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "stereo_occupancy/flight_simulation.h"
+
 namespace stereo_occupancy {
 namespace tools {
 
@@ -42,6 +44,15 @@ inline long parseWhole(const std::string& option, const std::string& text, long 
 inline std::string nextValue(int argc, char** argv, int* i) {
   if (*i + 1 >= argc) throw UsageError(std::string(argv[*i]) + " needs a value");
   return argv[++*i];
+}
+
+/// The named simulated flight, or a UsageError listing the names.
+inline FlightScenario scenarioNamed(const std::string& name) {
+  try {
+    return makeScenario(name);
+  } catch (const std::invalid_argument& e) {
+    throw UsageError(e.what());
+  }
 }
 
 /// Runs a tool's body; turns exceptions into one error line and an exit status.
