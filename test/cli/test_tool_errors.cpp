@@ -90,6 +90,7 @@ TEST(ToolErrors, CompareTable1AndFigures) {
                compare + " --resolution 0", compare + " --resolution nan", compare + " --truth-pixel-step"},
               2);
   expectError("table1", {table1 + " --repeat 0", table1 + " --repeat x", table1 + " --frobnicate"}, 2);
+  expectError("scaling", {std::string(SCALING_EXE) + " --repeat 0", std::string(SCALING_EXE) + " --frobnicate"}, 2);
   expectError("make_figures", {figures + " a b", figures + " --frobnicate"}, 2);
   expectError("make_figures", {figures + " /nonexistent/dir"}, 1);
 }
