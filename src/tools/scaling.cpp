@@ -4,7 +4,6 @@
 // prints Markdown tables and asserts nothing.
 
 #include <algorithm>
-#include <chrono>
 #include <iomanip>
 #include <iostream>
 #include <sstream>
@@ -13,6 +12,7 @@
 
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/synthetic_scene.h"
+#include "drawing_benchmark.h"
 #include "tool_support.h"
 
 namespace so = stereo_occupancy;
@@ -46,14 +46,8 @@ void row(const so::StereoCameraConfig& camera, double resolution, int repeat) {
     so::LocalGrid grid;
     so::DrawStatistics stats;
     const bool plain = algorithm == so::DrawingAlgorithm::kLine || algorithm == so::DrawingAlgorithm::kRayTrace;
-    std::vector<double> ms;
-    for (int r = 0; r < (plain ? 3 : repeat); ++r) {
-      drawer.prepareGrid(T_W_C, &grid);
-      const auto t0 = std::chrono::steady_clock::now();
-      stats = drawer.drawInto(image, T_W_C, &grid);
-      ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
-    }
-    std::sort(ms.begin(), ms.end());
+    const std::vector<double> ms =
+        tools::timeDrawing(&drawer, image, T_W_C, plain ? 3 : repeat, /*time_grid_preparation=*/false, &grid, &stats);
     std::ostringstream time;
     time << std::fixed << std::setprecision(ms[ms.size() / 2] < 10 ? 2 : 0) << ms[ms.size() / 2] << " ("
          << ms.front() << "-" << ms.back() << ")";

@@ -5,7 +5,6 @@
 // asserts nothing.
 
 #include <algorithm>
-#include <chrono>
 #include <cstdlib>
 #include <iomanip>
 #include <iostream>
@@ -16,6 +15,7 @@
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/disparity_io.h"
 #include "stereo_occupancy/synthetic_scene.h"
+#include "drawing_benchmark.h"
 #include "tool_support.h"
 
 namespace so = stereo_occupancy;
@@ -103,15 +103,8 @@ int run(int argc, char** argv) {
       so::DisparityDrawer drawer(camera, config);
       so::LocalGrid grid;
       so::DrawStatistics stats;
-      std::vector<double> ms;
-      const int n = repeatsFor(algorithm, repeat);
-      for (int r = 0; r < n; ++r) {
-        const auto t0 = std::chrono::steady_clock::now();
-        drawer.prepareGrid(T_W_C, &grid);
-        stats = drawer.drawInto(image, T_W_C, &grid);
-        ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
-      }
-      std::sort(ms.begin(), ms.end());
+      const std::vector<double> ms = so::tools::timeDrawing(&drawer, image, T_W_C, repeatsFor(algorithm, repeat),
+                                                            /*time_grid_preparation=*/true, &grid, &stats);
       const double median = ms[ms.size() / 2];
       const PaperRow* paper = nullptr;
       for (const auto& row : kPaper)
