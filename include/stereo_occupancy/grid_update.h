@@ -39,10 +39,18 @@ struct GridUpdate {
     const int64_t nx = size.x(), nxy = static_cast<int64_t>(size.x()) * size.y();
     size_t v = 0;
     for (size_t k = 0; k < run_start.size(); ++k) {
-      for (uint32_t i = run_start[k]; i < run_start[k] + run_length[k]; ++i, ++v) {
-        const int64_t z = i / nxy, rest = i % nxy;
-        f(origin_index + Eigen::Vector3i(static_cast<int>(rest % nx), static_cast<int>(rest / nx), static_cast<int>(z)),
-          log_odds[v]);
+      // Divide once per run, then step through the storage order.
+      const int64_t z = run_start[k] / nxy, rest = run_start[k] % nxy;
+      Eigen::Vector3i local(static_cast<int>(rest % nx), static_cast<int>(rest / nx), static_cast<int>(z));
+      for (uint32_t i = 0; i < run_length[k]; ++i, ++v) {
+        f(origin_index + local, log_odds[v]);
+        if (++local.x() == size.x()) {
+          local.x() = 0;
+          if (++local.y() == size.y()) {
+            local.y() = 0;
+            ++local.z();
+          }
+        }
       }
     }
   }

@@ -13,7 +13,7 @@
 
 namespace stereo_occupancy {
 
-class RebuildableOcTree;
+class AccumulatingOcTree;
 
 /// Parameters of the global map.
 struct MapAccumulatorConfig {
@@ -63,7 +63,7 @@ class MapAccumulator {
   void applyThresholds();
 
   MapAccumulatorConfig config_;
-  std::unique_ptr<RebuildableOcTree> tree_;
+  std::unique_ptr<AccumulatingOcTree> tree_;
   Eigen::Vector3d W_last_origin_ = Eigen::Vector3d::Zero();
   size_t updates_ = 0;
   mutable bool inner_stale_ = false;  ///< inner nodes lag the leaves until tree() is called

@@ -3,31 +3,10 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "stereo_occupancy/accumulating_octree.h"
 #include "stereo_occupancy/octomap_io.h"
 
 namespace stereo_occupancy {
-
-/// An OcTree that can be rebuilt leaf by leaf (octomap 1.9's deleteNode
-/// leaves the emptied inner nodes' child arrays behind and trips an
-/// assertion, so pruning copies the leaves to keep instead).
-class RebuildableOcTree : public octomap::OcTree {
- public:
-  using octomap::OcTree::OcTree;
-
-  /// Sets the leaf of @p key at @p depth (pruned leaves keep their size).
-  void setLeaf(const octomap::OcTreeKey& key, unsigned depth, float log_odds) {
-    if (!root) {
-      root = new octomap::OcTreeNode();
-      ++tree_size;
-    }
-    octomap::OcTreeNode* node = root;
-    for (unsigned d = 0; d < depth; ++d) {
-      const unsigned pos = octomap::computeChildIdx(key, static_cast<int>(tree_depth - 1 - d));
-      node = nodeChildExists(node, pos) ? getNodeChild(node, pos) : createNodeChild(node, pos);
-    }
-    node->setLogOdds(log_odds);
-  }
-};
 
 bool MapAccumulatorConfig::isValid(std::string* why) const {
   auto fail = [why](const char* text) {
@@ -70,7 +49,7 @@ void MapAccumulator::applyThresholds() {
 
 void MapAccumulator::reset() {
   inner_stale_ = false;
-  tree_ = std::make_unique<RebuildableOcTree>(config_.resolution_m);
+  tree_ = std::make_unique<AccumulatingOcTree>(config_.resolution_m);
   applyThresholds();
   updates_ = 0;
 }
@@ -84,10 +63,13 @@ bool MapAccumulator::integrate(const GridUpdate& update, std::string* why) {
     return false;
   }
   const int offset = static_cast<int>(tree_->coordToKey(0.0));  // key of global index 0
+  // The cells come in storage order, so consecutive keys are mostly
+  // neighbours: the updater descends from their common ancestor.
+  AccumulatingOcTree::LeafUpdater updater(tree_.get());
   update.forEachCell([&](const Eigen::Vector3i& g, float log_odds) {
     const Eigen::Vector3i k = g.array() + offset;
     if ((k.array() < 0).any() || (k.array() > 65535).any()) return;  // outside OcTree's extent
-    tree_->updateNode(octomap::OcTreeKey(k.x(), k.y(), k.z()), log_odds, /*lazy_eval=*/true);
+    updater.add(octomap::OcTreeKey(k.x(), k.y(), k.z()), log_odds);  // = updateNode(key, log_odds, lazy)
   });
   inner_stale_ = true;
   W_last_origin_ = update.W_sensor_origin;
@@ -107,7 +89,7 @@ size_t MapAccumulator::prune() {
   size_t outside = 0;
   for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it) outside += !inside(it);
   if (outside == 0) return 0;
-  auto kept = std::make_unique<RebuildableOcTree>(config_.resolution_m);
+  auto kept = std::make_unique<AccumulatingOcTree>(config_.resolution_m);
   for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it)
     if (inside(it)) kept->setLeaf(it.getKey(), it.getDepth(), it->getLogOdds());
   kept->updateInnerOccupancy();

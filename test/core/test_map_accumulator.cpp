@@ -10,8 +10,11 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <random>
+#include <sstream>
 #include <thread>
 
+#include "stereo_occupancy/accumulating_octree.h"
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
@@ -193,4 +196,83 @@ TEST(MapAccumulator, KillDuringSaveLeavesThePreviousMapIntact) {
   EXPECT_GT(killed_mid_write, 0) << "no kill landed during a write: the test proved nothing";
   std::remove(paths[0].c_str());
   std::remove(paths[1].c_str());
+}
+
+namespace {
+/// The whole tree, every node's value included (.ot format).
+std::string fullTree(const octomap::OcTree& tree) {
+  std::ostringstream out;
+  tree.write(out);
+  return out.str();
+}
+}  // namespace
+
+// The accumulator's fast path against octomap's own updateNode(key, value,
+// lazy_eval = true): the same trees, node for node, from a tree holding
+// pruned leaves (clamped and not) and with keys in storage order, repeated
+// (so that leaves clamp) and in random order.
+TEST(AccumulatingOcTree, LeafUpdaterEqualsUpdateNode) {
+  const double res = 0.25;
+  AccumulatingOcTree fast(res);
+  octomap::OcTree plain(res);
+  auto both = [&](const octomap::OcTreeKey& key, float value) {
+    AccumulatingOcTree::LeafUpdater(&fast).add(key, value);
+    plain.updateNode(key, value, true);
+  };
+  const uint16_t o = 32768;
+  // Two pruned 2x2x2 blocks (one clamped occupied, one at 0.4) and a
+  // pruned 4x4x4 block of clamped free space, next to single leaves.
+  for (int i = 0; i < 8; ++i) {
+    const octomap::OcTreeKey a(o + (i & 1), o + ((i >> 1) & 1), o + (i >> 2));
+    for (int r = 0; r < 5; ++r) both(a, 0.85f);
+    both(octomap::OcTreeKey(o + 4 + (i & 1), o + ((i >> 1) & 1), o + (i >> 2)), 0.4f);
+  }
+  for (int i = 0; i < 64; ++i)
+    for (int r = 0; r < 6; ++r) both(octomap::OcTreeKey(o + 8 + (i & 3), o + ((i >> 2) & 3), o + (i >> 4)), -0.4f);
+  both(octomap::OcTreeKey(o + 2, o + 2, o + 2), 0.3f);
+  fast.updateInnerOccupancy();
+  plain.updateInnerOccupancy();
+  fast.prune();
+  plain.prune();
+  ASSERT_EQ(fullTree(fast), fullTree(plain));
+  ASSERT_LT(plain.size(), 8u * 16u) << "the blocks were not pruned";
+  // Updates that push the clamped blocks further change nothing (updateNode
+  // returns early at the pruned node), others expand them.
+  const size_t pruned_size = plain.size();
+  both(octomap::OcTreeKey(o + 1, o, o + 1), 0.85f);
+  both(octomap::OcTreeKey(o + 9, o + 3, o + 2), -0.4f);
+  both(octomap::OcTreeKey(o + 9, o + 3, o + 2), 0.0f);
+  EXPECT_EQ(plain.size(), pruned_size);
+  ASSERT_EQ(fullTree(fast), fullTree(plain));
+  both(octomap::OcTreeKey(o + 5, o + 1, o), 0.3f);
+  EXPECT_GT(plain.size(), pruned_size);
+  ASSERT_EQ(fullTree(fast), fullTree(plain));
+
+  // A 16x6x5 grid over all of it, in storage order, three times.
+  std::mt19937 rng(7);
+  const float values[] = {-0.4f, 0.0f, 0.17f, 0.85f, 2.5f, -2.5f};
+  std::vector<std::pair<octomap::OcTreeKey, float>> cells;
+  for (int z = -1; z < 4; ++z)
+    for (int y = -1; y < 5; ++y)
+      for (int x = -1; x < 15; ++x) cells.push_back({octomap::OcTreeKey(o + x, o + y, o + z), values[rng() % 6]});
+  for (int pass = 0; pass < 3; ++pass) {
+    AccumulatingOcTree::LeafUpdater updater(&fast);
+    for (const auto& [key, value] : cells) {
+      updater.add(key, value);
+      plain.updateNode(key, value, true);
+    }
+    ASSERT_EQ(fullTree(fast), fullTree(plain)) << "pass " << pass;
+  }
+  // Random keys, far apart and close, with repeats.
+  AccumulatingOcTree::LeafUpdater updater(&fast);
+  for (int i = 0; i < 20000; ++i) {
+    const int spread = i % 2 ? 40 : 40000;
+    const octomap::OcTreeKey key(o - spread / 2 + rng() % spread, o - spread / 2 + rng() % spread,
+                                 o - 5 + rng() % 10);
+    const float value = values[rng() % 6];
+    updater.add(key, value);
+    plain.updateNode(key, value, true);
+  }
+  EXPECT_EQ(fast.size(), plain.size());
+  EXPECT_EQ(fullTree(fast), fullTree(plain));
 }

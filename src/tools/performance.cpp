@@ -1,0 +1,217 @@
+// performance: the performance issue's figures in one run, on the Table I
+// frame (640x480, b = 0.3 m, f = 700 px, 25 m range) at 0.25 m cells, one
+// thread: each stage of the mapper's path timed alone (median and min-max of
+// N runs), and OctoMap's insertPointCloud on the same frame for comparison.
+// A benchmark: it prints figures and asserts nothing.
+//
+// --only STAGE runs one stage N times and prints nothing else (for
+// valgrind --tool=callgrind).
+
+#include <octomap/octomap.h>
+
+#include <algorithm>
+#include <chrono>
+#include <functional>
+#include <iomanip>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "stereo_occupancy/disparity_drawer.h"
+#include "stereo_occupancy/grid_update.h"
+#include "stereo_occupancy/map_accumulator.h"
+#include "stereo_occupancy/synthetic_scene.h"
+#include "tool_support.h"
+
+namespace so = stereo_occupancy;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct Timing {
+  std::vector<double> ms;  // sorted
+  double median() const { return ms[ms.size() / 2]; }
+  std::string text() const {
+    std::ostringstream s;
+    s << std::fixed << std::setprecision(median() < 10 ? 3 : 1) << median() << " (" << ms.front() << "-" << ms.back()
+      << ")";
+    return s.str();
+  }
+};
+
+/// Times @p body @p repeats times; @p setup runs before each, untimed.
+Timing timeIt(int repeats, const std::function<void()>& setup, const std::function<void()>& body) {
+  Timing t;
+  for (int r = 0; r < repeats; ++r) {
+    setup();
+    const auto t0 = Clock::now();
+    body();
+    t.ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+  }
+  std::sort(t.ms.begin(), t.ms.end());
+  return t;
+}
+
+const char* kStages =
+    "line, line_pyramid, raytrace, raytrace_pyramid, line_pyramid_bounded, raytrace_pyramid_bounded, blur, "
+    "encode, fusion, octomap";
+
+int run(int argc, char** argv) {
+  int repeat = 21;
+  std::string only;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--repeat") {
+      repeat = static_cast<int>(so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 1, 100000));
+    } else if (a == "--only") {
+      only = so::tools::nextValue(argc, argv, &i);
+      if (std::string(", ").append(kStages).append(",").find(", " + only + ",") == std::string::npos)
+        throw so::tools::UsageError("unknown stage '" + only + "' (one of " + kStages + ")");
+    } else if (a == "--help") {
+      std::cout << "usage: performance [--repeat N] [--only STAGE]\n"
+                   "Times the mapper's stages on the Table I frame at 0.25 m (median and min-max of N runs, "
+                   "default 21) and OctoMap's insertPointCloud on the same frame.\n"
+                   "STAGE: "
+                << kStages << "\n";
+      return 0;
+    } else {
+      throw so::tools::UsageError("unknown option '" + a + "'");
+    }
+  }
+  const bool quiet = !only.empty();
+  auto wanted = [&](const std::string& stage) { return only.empty() || only == stage; };
+
+  so::StereoCameraConfig camera;  // the paper's camera
+  Eigen::Isometry3d T_W_C;
+  const cv::Mat image = so::table1Image(so::StereoCameraModel(camera), &T_W_C);
+  const double resolution = 0.25;
+  if (!quiet)
+    std::cout << "Table I frame: 640x480, b = 0.3 m, f = 700 px, 25 m range, " << resolution
+              << " m cells; one thread; median (min-max) of " << repeat << " runs [ms].\n\n"
+              << "| stage | time ms | what is timed |\n|---|---:|---|\n";
+  auto row = [&](const std::string& stage, const Timing& t, const std::string& what) {
+    if (!quiet) std::cout << "| " << stage << " | " << t.text() << " | " << what << " |" << std::endl;
+  };
+
+  // Drawing: pyramids + drawing, into a grid shaped and cleared beforehand.
+  double line_pyramid_ms = 0.0;
+  for (so::DrawingAlgorithm algorithm : so::allDrawingAlgorithms()) {
+    const std::string name = so::toString(algorithm);
+    if (!wanted(name)) continue;
+    so::DrawingConfig config;
+    config.algorithm = algorithm;
+    config.resolution_m = resolution;
+    so::DisparityDrawer drawer(camera, config);
+    so::LocalGrid grid;
+    const bool slow = algorithm == so::DrawingAlgorithm::kLine || algorithm == so::DrawingAlgorithm::kRayTrace;
+    const Timing t = timeIt(
+        slow && !quiet ? std::max(3, repeat / 7) : repeat, [&] { drawer.prepareGrid(T_W_C, &grid); },
+        [&] { drawer.drawInto(image, T_W_C, &grid); });
+    if (algorithm == so::DrawingAlgorithm::kLinePyramid) line_pyramid_ms = t.median();
+    row(name, t, "pyramids + drawing");
+  }
+
+  if (!(wanted("line_pyramid") || wanted("blur") || wanted("encode") || wanted("fusion") || wanted("octomap")))
+    return 0;
+  // The grid the later stages start from: line_pyramid's, as the mapper's.
+  so::DrawingConfig config;
+  config.algorithm = so::DrawingAlgorithm::kLinePyramid;
+  config.resolution_m = resolution;
+  config.blur.sigma_trans_m = 0.1;
+  config.blur.sigma_angle_rad = 0.01;
+  so::DisparityDrawer drawer(camera, config);
+  so::LocalGrid drawn;
+  drawer.prepareGrid(T_W_C, &drawn);  // padded for the blur
+  drawer.drawInto(image, T_W_C, &drawn);
+  if (wanted("line_pyramid")) {
+    so::LocalGrid grid;
+    row("grid preparation", timeIt(repeat, [] {}, [&] { drawer.prepareGrid(T_W_C, &grid); }),
+        "shape the frustum's box (padded for the blur) and set it unknown; " + std::to_string(drawn.numCells()) +
+            " cells");
+  }
+
+  so::LocalGrid blurred = drawn;
+  double blur_ms = 0.0;
+  if (wanted("blur")) {
+    so::LocalGrid grid;
+    const Timing t = timeIt(repeat, [&] { grid = drawn; }, [&] { drawer.blur(T_W_C, &grid); });
+    blur_ms = t.median();
+    blurred = grid;
+    row("blur", t, "eq. 17 with σ_trans 0.1 m, σ_angle 0.01 rad over the padded grid");
+  } else {
+    drawer.blur(T_W_C, &blurred);
+  }
+
+  so::GridUpdate update;
+  double encode_ms = 0.0;
+  if (wanted("encode")) {
+    const Timing t = timeIt(repeat, [] {}, [&] { so::encodeGridUpdate(blurred, T_W_C.translation(), &update); });
+    encode_ms = t.median();
+    row("encode", t, "known cells of the blurred grid into an update (" + std::to_string(update.numCells()) +
+                         " cells)");
+  } else {
+    so::encodeGridUpdate(blurred, T_W_C.translation(), &update);
+  }
+
+  so::MapAccumulatorConfig map_config;
+  map_config.resolution_m = resolution;
+  double fusion_ms = 0.0;
+  if (wanted("fusion")) {
+    std::unique_ptr<so::MapAccumulator> map;
+    const Timing cold = timeIt(
+        repeat, [&] { map = std::make_unique<so::MapAccumulator>(map_config); }, [&] { map->integrate(update); });
+    row("fusion, new map", cold, "the update into an empty OcTree");
+    const Timing warm = timeIt(
+        repeat,
+        [&] {
+          map = std::make_unique<so::MapAccumulator>(map_config);
+          map->integrate(update);
+        },
+        [&] { map->integrate(update); });
+    fusion_ms = warm.median();
+    row("fusion", warm, "the update into an OcTree that holds it already (its nodes exist)");
+  }
+
+  if (wanted("octomap")) {
+    // The same frame as a point cloud: every matched pixel's point; the
+    // sky (zero disparity) as a point beyond the range, whose ray OctoMap
+    // draws free up to the range.
+    const so::StereoCameraModel model(camera);
+    octomap::Pointcloud cloud;
+    for (int y = 0; y < image.rows; ++y)
+      for (int x = 0; x < image.cols; ++x) {
+        const float d = image.at<float>(y, x);
+        if (!(d >= 0.0f)) continue;
+        const Eigen::Vector3d C_p = d > 0.0f ? model.pointFromDisparity(x, y, d)
+                                             : Eigen::Vector3d(model.rayThroughPixel(x, y) * 2.0 * camera.max_range_m);
+        const Eigen::Vector3d W_p = T_W_C * C_p;
+        cloud.push_back(static_cast<float>(W_p.x()), static_cast<float>(W_p.y()), static_cast<float>(W_p.z()));
+      }
+    const Eigen::Vector3d o = T_W_C.translation();
+    std::unique_ptr<octomap::OcTree> tree;
+    const Timing t = timeIt(
+        std::max(3, repeat / 7), [&] { tree = std::make_unique<octomap::OcTree>(resolution); },
+        [&] {
+          tree->insertPointCloud(cloud, octomap::point3d(o.x(), o.y(), o.z()), camera.max_range_m,
+                                 /*lazy_eval=*/false, /*discretize=*/true);
+        });
+    row("OctoMap insertPointCloud", t,
+        "discretize on, " + std::to_string(cloud.size()) + " points, into an empty OcTree");
+    if (!quiet && line_pyramid_ms > 0.0 && fusion_ms > 0.0) {
+      const double ours = line_pyramid_ms + encode_ms + fusion_ms;
+      std::cout << "\nOctoMap insertPointCloud / line_pyramid drawing: " << std::fixed << std::setprecision(0)
+                << t.median() / line_pyramid_ms << "x; / (line_pyramid + encode + fusion): "
+                << t.median() / ours << "x; / (line_pyramid + blur + encode + fusion): "
+                << t.median() / (ours + blur_ms) << "x\n";
+    }
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return so::tools::runTool("performance", [&] { return run(argc, argv); });
+}
