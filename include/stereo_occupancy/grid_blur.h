@@ -54,12 +54,31 @@ class DistanceDependentBlur {
   const std::vector<float>& kernel(int q);
 
  private:
-  void pass(int axis, const LocalGrid& grid, const float* in, float* out);
+  /// Cells [lo, hi) of one row (fixed y, z); empty if lo >= hi.
+  struct Extent {
+    int lo = 0, hi = 0;
+    bool empty() const { return lo >= hi; }
+  };
+  /// Cells [begin, end) of one row that share the rounded σ q.
+  struct KernelRun {
+    int begin, end, q;
+  };
+  /// One separable pass along y (axis 1) or z (axis 2): out = in * kernel
+  /// over the rows of @p out_extent, reading only the rows' @p in_extent.
+  void crossPass(int axis, const LocalGrid& grid, const std::vector<Extent>& in_extent, const float* in,
+                 const std::vector<Extent>& out_extent, float* out) const;
+  const float* weights(int q) const { return &weights_[static_cast<size_t>(q) * (2 * radius_ + 1)]; }
 
   BlurConfig config_;
   std::vector<std::vector<float>> kernels_;
-  std::vector<uint8_t> kernel_index_;
-  std::vector<uint8_t> line_nonzero_;  ///< per line of a pass: holds a non-zero input
+  int radius_ = 0;              ///< largest kernel radius in the grid [cells]
+  std::vector<float> weights_;  ///< per q: its kernel padded with zeros to radius_
+  /// Rows' extents of non-zero values: the input, after x, after y, after z.
+  std::vector<Extent> extent_[4];
+  std::vector<KernelRun> runs_;     ///< per row, over its final extent
+  std::vector<uint32_t> row_runs_;  ///< row r's runs are runs_[row_runs_[r] .. row_runs_[r + 1])
+  std::vector<int> sigma_index_;  ///< q along one row
+  std::vector<float> scratch_;
   std::vector<float> buffer_a_;
   std::vector<float> buffer_b_;
 };

@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 namespace stereo_occupancy {
 
@@ -50,43 +53,31 @@ const std::vector<float>& DistanceDependentBlur::kernel(int q) {
   return k;
 }
 
-void DistanceDependentBlur::pass(int axis, const LocalGrid& grid, const float* in, float* out) {
-  const Eigen::Vector3i& size = grid.size();
-  const int64_t stride = axis == 0 ? 1 : (axis == 1 ? size.x() : static_cast<int64_t>(size.x()) * size.y());
-  const int n = size[axis];
-  // A line along the axis whose input is all zero stays zero: most of a
-  // frustum's box is unknown (zero here), so most lines are skipped.
-  auto line = [&](int x, int y, int z) {
-    return axis == 0 ? y + size.y() * z : (axis == 1 ? x + size.x() * z : x + size.x() * y);
-  };
-  line_nonzero_.assign(static_cast<size_t>(axis == 0 ? size.y() * size.z()
-                                                     : (axis == 1 ? size.x() * size.z() : size.x() * size.y())),
-                       0);
-  size_t idx = 0;
-  for (int z = 0; z < size.z(); ++z)
-    for (int y = 0; y < size.y(); ++y)
-      for (int x = 0; x < size.x(); ++x, ++idx)
-        if (in[idx] != 0.0f) line_nonzero_[line(x, y, z)] = 1;
-  idx = 0;
-  for (int z = 0; z < size.z(); ++z) {
-    for (int y = 0; y < size.y(); ++y) {
-      for (int x = 0; x < size.x(); ++x, ++idx) {
-        if (!line_nonzero_[line(x, y, z)]) {
-          out[idx] = 0.0f;
-          continue;
+void DistanceDependentBlur::crossPass(int axis, const LocalGrid& grid, const std::vector<Extent>& in_extent,
+                                      const float* in, const std::vector<Extent>& out_extent, float* out) const {
+  const int nx = grid.size().x(), ny = grid.size().y(), nz = grid.size().z();
+  const int n = axis == 1 ? ny : nz;
+  const int row_step = axis == 1 ? 1 : ny;  // row index step of one cell along the axis
+  for (int z = 0; z < nz; ++z) {
+    for (int y = 0; y < ny; ++y) {
+      const int r = y + ny * z;
+      const Extent& e = out_extent[r];
+      if (e.empty()) continue;
+      float* o = out + static_cast<int64_t>(nx) * r;
+      std::fill(o + e.lo, o + e.hi, 0.0f);
+      const int coord = axis == 1 ? y : z;
+      for (uint32_t k = row_runs_[r]; k < row_runs_[r + 1]; ++k) {
+        const KernelRun& run = runs_[k];
+        const float* w = weights(run.q);
+        // Taps in ascending order, as a cell's own sum would add them.
+        for (int i = std::max(-radius_, -coord); i <= std::min(radius_, n - 1 - coord); ++i) {
+          const float wi = w[i + radius_];
+          const Extent& src_extent = in_extent[r + i * row_step];
+          const int lo = std::max({run.begin, e.lo, src_extent.lo}), hi = std::min({run.end, e.hi, src_extent.hi});
+          if (wi == 0.0f || lo >= hi) continue;  // adds nothing: zero weight or zero input
+          const float* src = in + static_cast<int64_t>(nx) * (r + i * row_step);
+          for (int x = lo; x < hi; ++x) o[x] += wi * src[x];
         }
-        const std::vector<float>& k = kernels_[kernel_index_[idx]];
-        const int radius = static_cast<int>(k.size() / 2);
-        if (radius == 0) {
-          out[idx] = in[idx];
-          continue;
-        }
-        const int coord = axis == 0 ? x : (axis == 1 ? y : z);
-        const int lo = std::max(-radius, -coord);
-        const int hi = std::min(radius, n - 1 - coord);
-        float sum = 0.0f;
-        for (int i = lo; i <= hi; ++i) sum += k[i + radius] * in[static_cast<int64_t>(idx) + i * stride];
-        out[idx] = sum;
       }
     }
   }
@@ -94,48 +85,160 @@ void DistanceDependentBlur::pass(int axis, const LocalGrid& grid, const float* i
 
 void DistanceDependentBlur::apply(const Eigen::Vector3d& W_camera, LocalGrid* grid) {
   if (!config_.enabled()) return;
-  const size_t cells = grid->numCells();
-  const double c = grid->resolution();
-  kernel_index_.resize(cells);
-  buffer_a_.resize(cells);
-  buffer_b_.resize(cells);
+  // Most of a frustum's box is unknown: the passes visit only each row's
+  // extent of non-zero values (grown by the kernel radius per pass), and
+  // within a row, runs of cells that share one kernel. Each cell's sum adds
+  // its taps in the order of a plain per-cell convolution.
+  const int nx = grid->size().x(), ny = grid->size().y(), nz = grid->size().z();
+  const int rows = ny * nz;
   float* data = grid->data();
+  auto known = [](float v) { return v == LocalGrid::kUnknown ? 0.0f : v; };  // unknown enters as 0
+
+  std::vector<Extent>& e0 = extent_[0];
+  e0.assign(rows, Extent{});
+  bool any = false;
+  // Blocks of 16 cells tested at once (a vectorisable test), then cell by cell.
+  constexpr int kBlock = 16;
+  auto blockHolds = [](const float* p) {
+#if defined(__SSE2__)
+    const __m128 unknown = _mm_set1_ps(LocalGrid::kUnknown), zero = _mm_setzero_ps();
+    __m128 hit = zero;
+    for (int j = 0; j < kBlock; j += 4) {
+      const __m128 v = _mm_loadu_ps(p + j);
+      hit = _mm_or_ps(hit, _mm_and_ps(_mm_cmpneq_ps(v, unknown), _mm_cmpneq_ps(v, zero)));
+    }
+    return _mm_movemask_ps(hit) != 0;
+#else
+    bool hit = false;
+    for (int j = 0; j < kBlock; ++j) hit |= p[j] != LocalGrid::kUnknown && p[j] != 0.0f;
+    return hit;
+#endif
+  };
+  for (int r = 0; r < rows; ++r) {
+    const float* row = data + static_cast<int64_t>(nx) * r;
+    int lo = 0;
+    while (lo + kBlock <= nx && !blockHolds(row + lo)) lo += kBlock;
+    while (lo < nx && known(row[lo]) == 0.0f) ++lo;
+    if (lo == nx) continue;
+    int hi = nx;
+    while (hi - kBlock >= lo && !blockHolds(row + hi - kBlock)) hi -= kBlock;
+    while (hi > lo && known(row[hi - 1]) == 0.0f) --hi;
+    e0[r] = Extent{lo, hi};
+    any = true;
+  }
+  if (!any) return;  // all zero or unknown: the blur changes nothing
 
   // Rounded σ per cell (eq. 17: σ² = σ_trans² + (r·σ_angle)², r² summed per
-  // axis); unknown cells enter as log-odds 0.
-  const Eigen::Vector3i& size = grid->size();
+  // axis); largest at the box corner farthest from the camera.
+  const double c = grid->resolution();
   std::array<std::vector<double>, 3> squares;  // (cell centre - camera)² per axis and index
+  double r2_max = 0.0;
   for (int a = 0; a < 3; ++a) {
-    squares[a].resize(size[a]);
-    for (int i = 0; i < size[a]; ++i) {
+    squares[a].resize(grid->size()[a]);
+    for (int i = 0; i < grid->size()[a]; ++i) {
       const double d = (grid->originIndex()[a] + i + 0.5) * c - W_camera[a];
       squares[a][i] = d * d;
     }
+    r2_max += std::max(squares[a].front(), squares[a].back());
   }
   const double trans2 = config_.sigma_trans_m * config_.sigma_trans_m;
   const double angle2 = config_.sigma_angle_rad * config_.sigma_angle_rad;
   const double to_steps = 1.0 / (c * config_.sigma_step_cells);
-  size_t idx = 0;
-  for (int z = 0; z < size.z(); ++z) {
-    for (int y = 0; y < size.y(); ++y) {
+  auto sigmaIndex = [&](double r2) {
+    const double steps = std::sqrt(trans2 + r2 * angle2) * to_steps;
+    return steps >= 255.0 ? 255 : static_cast<int>(steps + 0.5);  // round half up, as lround for >= 0
+  };
+  const int q_max = sigmaIndex(r2_max);
+  radius_ = static_cast<int>(kernel(q_max).size() / 2);  // radii grow with σ
+  const int taps = 2 * radius_ + 1;
+  weights_.assign(static_cast<size_t>(q_max + 1) * taps, 0.0f);
+  for (int q = 0; q <= q_max; ++q) {
+    const std::vector<float>& k = kernel(q);
+    const int r = static_cast<int>(k.size() / 2);
+    std::copy(k.begin(), k.end(), weights_.begin() + static_cast<int64_t>(q) * taps + radius_ - r);
+  }
+
+  // Where each pass's output can be non-zero: grown by the radius along its axis.
+  std::vector<Extent>&e1 = extent_[1], &e2 = extent_[2], &e3 = extent_[3];
+  e1.assign(rows, Extent{});
+  for (int r = 0; r < rows; ++r)
+    if (!e0[r].empty()) e1[r] = Extent{std::max(0, e0[r].lo - radius_), std::min(nx, e0[r].hi + radius_)};
+  auto grow = [&](const std::vector<Extent>& in, int axis, std::vector<Extent>* out) {
+    out->assign(rows, Extent{});
+    const int n = axis == 1 ? ny : nz;
+    const int row_step = axis == 1 ? 1 : ny;
+    for (int z = 0; z < nz; ++z)
+      for (int y = 0; y < ny; ++y) {
+        const int r = y + ny * z, coord = axis == 1 ? y : z;
+        Extent hull{nx, 0};
+        for (int i = std::max(-radius_, -coord); i <= std::min(radius_, n - 1 - coord); ++i) {
+          const Extent& e = in[r + i * row_step];
+          if (e.empty()) continue;
+          hull.lo = std::min(hull.lo, e.lo);
+          hull.hi = std::max(hull.hi, e.hi);
+        }
+        (*out)[r] = hull;
+      }
+  };
+  grow(e1, 1, &e2);
+  grow(e2, 2, &e3);
+
+  // Runs of one kernel over each row's final extent (which holds the others).
+  runs_.clear();
+  row_runs_.assign(rows + 1, 0);
+  sigma_index_.resize(nx);
+  for (int z = 0; z < nz; ++z)
+    for (int y = 0; y < ny; ++y) {
+      const int r = y + ny * z;
+      row_runs_[r] = static_cast<uint32_t>(runs_.size());
       const double yz2 = squares[1][y] + squares[2][z];
-      for (int x = 0; x < size.x(); ++x, ++idx) {
-        const double steps = std::sqrt(trans2 + (squares[0][x] + yz2) * angle2) * to_steps;
-        const int q = steps >= 255.0 ? 255 : static_cast<int>(steps + 0.5);  // round half up, as lround for >= 0
-        kernel_index_[idx] = static_cast<uint8_t>(q);
-        buffer_a_[idx] = data[idx] == LocalGrid::kUnknown ? 0.0f : data[idx];
+      const int lo = e3[r].lo, hi = e3[r].hi;
+      for (int x = lo; x < hi; ++x) sigma_index_[x] = sigmaIndex(squares[0][x] + yz2);  // vectorisable
+      for (int x = lo; x < hi; ++x) {
+        if (x > lo && runs_.back().q == sigma_index_[x]) {
+          runs_.back().end = x + 1;
+        } else {
+          runs_.push_back(KernelRun{x, x + 1, sigma_index_[x]});
+        }
+      }
+    }
+  row_runs_[rows] = static_cast<uint32_t>(runs_.size());
+
+  const size_t cells = grid->numCells();
+  buffer_a_.resize(cells);  // holds values only within the extents
+  buffer_b_.resize(cells);
+  scratch_.resize(nx);
+
+  // Along x: the row, unknown as 0, into a scratch line first.
+  for (int r = 0; r < rows; ++r) {
+    const Extent& e = e1[r];
+    if (e.empty()) continue;
+    const float* row = data + static_cast<int64_t>(nx) * r;
+    const int read_lo = std::max(0, e.lo - radius_), read_hi = std::min(nx, e.hi + radius_);
+    for (int x = read_lo; x < read_hi; ++x) scratch_[x] = known(row[x]);
+    float* o = buffer_b_.data() + static_cast<int64_t>(nx) * r;
+    std::fill(o + e.lo, o + e.hi, 0.0f);
+    for (uint32_t k = row_runs_[r]; k < row_runs_[r + 1]; ++k) {
+      const KernelRun& run = runs_[k];
+      const float* w = weights(run.q);
+      for (int i = -radius_; i <= radius_; ++i) {
+        const float wi = w[i + radius_];
+        const int lo = std::max({run.begin, e.lo, -i}), hi = std::min({run.end, e.hi, nx - i});
+        if (wi == 0.0f || lo >= hi) continue;
+        const float* src = scratch_.data() + i;
+        for (int x = lo; x < hi; ++x) o[x] += wi * src[x];
       }
     }
   }
-  std::array<bool, 256> used{};
-  for (size_t i = 0; i < cells; ++i) used[kernel_index_[i]] = true;
-  for (int q = 0; q < 256; ++q)
-    if (used[q]) kernel(q);  // built once per rounded σ
-  pass(0, *grid, buffer_a_.data(), buffer_b_.data());
-  pass(1, *grid, buffer_b_.data(), buffer_a_.data());
-  pass(2, *grid, buffer_a_.data(), buffer_b_.data());
-  for (size_t i = 0; i < cells; ++i) {
-    if (data[i] != LocalGrid::kUnknown || buffer_b_[i] != 0.0f) data[i] = buffer_b_[i];
+  crossPass(1, *grid, e1, buffer_b_.data(), e2, buffer_a_.data());
+  crossPass(2, *grid, e2, buffer_a_.data(), e3, buffer_b_.data());
+
+  // Unknown cells stay unknown unless the blur gave them a value.
+  for (int r = 0; r < rows; ++r) {
+    float* row = data + static_cast<int64_t>(nx) * r;
+    const float* b = buffer_b_.data() + static_cast<int64_t>(nx) * r;
+    for (int x = e3[r].lo; x < e3[r].hi; ++x)
+      if (row[x] != LocalGrid::kUnknown || b[x] != 0.0f) row[x] = b[x];
   }
 }
 
