@@ -43,9 +43,12 @@ inline int floorLog2(double x) {
   return static_cast<int>((bits >> 52) & 0x7ffu) - 1023;
 }
 
-/// 2^i for |i| < 63, exactly.
+/// 2^i for |i| < 63, exactly: the double whose exponent is i (no division).
 inline double powerOfTwo(int i) {
-  return i >= 0 ? static_cast<double>(uint64_t{1} << i) : 1.0 / static_cast<double>(uint64_t{1} << -i);
+  const uint64_t bits = static_cast<uint64_t>(i + 1023) << 52;
+  double x;
+  std::memcpy(&x, &bits, sizeof x);
+  return x;
 }
 
 }  // namespace stereo_occupancy

@@ -9,6 +9,8 @@
 #include <string>
 #include <vector>
 
+#include "stereo_occupancy/stereo_camera_model.h"
+
 namespace stereo_occupancy {
 
 /// Parameters of eqs. 9-10 plus the clamp that keeps eq. 9 a probability.
@@ -128,6 +130,10 @@ class LogOddsTable {
   /// Profile of a zero-disparity pixel: free space along the whole ray.
   RangeProfile freeProfile() const;
 
+  /// profile(l_p, Δl).tail_m without the rest of the profile: beyond l_p
+  /// plus this a measurement says nothing [m].
+  float tailOf(float delta_l_m) const { return static_cast<float>(0.5 * cell_size_m_) + kTailSigmas * delta_l_m; }
+
   double cellSize() const { return cell_size_m_; }
   float freeLogOdds() const { return free_log_odds_; }
 
@@ -141,11 +147,21 @@ class LogOddsTable {
   std::vector<float> values_;
 };
 
-class StereoCameraModel;
+/// True if disparity @p d_px measures a range; false for zero and for a
+/// positive one whose depth lies beyond a thousand times the maximum range
+/// (its Δl would overflow): such a pixel sees free space to the range.
+inline bool measuresRange(const StereoCameraModel& camera, float d_px) {
+  return d_px > 1e-3 * camera.farDisparity();
+}
 
-/// The profile of L̂ along the ray of the pixel at image position (x, y) with
-/// disparity d > 0, or free space up to the maximum range for d = 0
-/// (eqs. 1, 2, 4, 6, 7).
+/// The profile of L̂ along a pixel's ray for a disparity d > 0 for which
+/// measuresRange() holds (eqs. 1, 2, 4, 6, 7); @p ray_norm is |p_c| / z_c of
+/// the ray (eq. 2: the norm of (x - c_x, y - c_y, f) / f).
+RangeProfile measuredProfile(const StereoCameraModel& camera, const LogOddsTable& table, double ray_norm,
+                             float d_px);
+
+/// measuredProfile(), or free space up to the maximum range (freeProfile())
+/// for a disparity that measures no range.
 RangeProfile pixelProfile(const StereoCameraModel& camera, const LogOddsTable& table, double x_px, double y_px,
                           float d_px);
 

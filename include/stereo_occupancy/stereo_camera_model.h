@@ -71,8 +71,9 @@ class StereoCameraModel {
   /// Range along the ray l_p = |p_c| [m] (eq. 6).
   static double range(const Eigen::Vector3d& C_point) { return C_point.norm(); }
 
-  /// Range uncertainty Δl_p = Δz_c · l_p / z_c [m] (eq. 7).
-  double rangeUncertainty(double z_m, double l_m) const { return depthUncertainty(z_m) * l_m / z_m; }
+  /// Range uncertainty Δl_p = Δz_c · l_p / z_c [m] (eq. 7), with eq. 4's Δz_c
+  /// folded in: z_c · l_p · Δd / (b f), without a division.
+  double rangeUncertainty(double z_m, double l_m) const { return z_m * l_m * delta_d_over_bf_; }
 
   /// Smallest disparity whose depth is still inside max_range_m [px].
   double farDisparity() const { return bf_ / config_.max_range_m; }
@@ -82,14 +83,23 @@ class StereoCameraModel {
 
   /// True if the pixel's value carries information: 0 (infinitely far) or a
   /// finite disparity in [min_disparity_px, nearDisparity()].
-  bool isValidDisparity(float d_px) const {
-    return (d_px == 0.0f) | ((d_px >= min_valid_) & (d_px <= max_valid_));  // branch-free; false for NaN
-  }
+  bool isValidDisparity(float d_px) const { return DisparityValidity{min_valid_, max_valid_}(d_px); }
+
+  /// isValidDisparity() as a value, for loops that should keep its bounds in
+  /// registers (a member's bounds are reloaded after every store through a float*).
+  struct DisparityValidity {
+    float min_px, max_px;
+    bool operator()(float d_px) const {
+      return (d_px == 0.0f) | ((d_px >= min_px) & (d_px <= max_px));  // branch-free; false for NaN
+    }
+  };
+  DisparityValidity validity() const { return DisparityValidity{min_valid_, max_valid_}; }
 
  private:
   StereoCameraConfig config_;
   double bf_;
   double inv_f_;
+  double delta_d_over_bf_;  ///< Δd / (b f) [1/m]
   float min_valid_;
   float max_valid_;
 };

@@ -18,34 +18,34 @@ void DisparityPyramid::build(const cv::Mat& disparity, const StereoCameraModel& 
   // information. Branch-free, so that it vectorises.
   cv::Mat& d0 = levels_[0];
   d0.create(disparity.rows, disparity.cols, CV_32FC1);
+  const StereoCameraModel::DisparityValidity valid = camera.validity();
   for (int y = 0; y < disparity.rows; ++y) {
     const float* in = disparity.ptr<float>(y);
     float* out = d0.ptr<float>(y);
-    for (int x = 0; x < disparity.cols; ++x) {
-      out[x] = camera.isValidDisparity(in[x]) ? in[x] : invalid;
-    }
+    for (int x = 0; x < disparity.cols; ++x) out[x] = valid(in[x]) ? in[x] : invalid;
   }
 
-  for (int i = 1; i <= top_level; ++i) {
-    const cv::Mat& src = levels_[i - 1];
-    cv::Mat& dst = levels_[i];
-    const int w = (src.cols + 1) / 2;
-    const int h = (src.rows + 1) / 2;
-    dst.create(h, w, CV_32FC1);
-    for (int y = 0; y < h; ++y) {
-      const float* r0 = src.ptr<float>(2 * y);
-      const float* r1 = 2 * y + 1 < src.rows ? src.ptr<float>(2 * y + 1) : r0;
-      float* out = dst.ptr<float>(y);
-      for (int x = 0; x < w; ++x) {
-        const int x0 = 2 * x;
-        const int x1 = x0 + 1 < src.cols ? x0 + 1 : x0;
-        if (type == PyramidType::kMinDisparity) {  // eq. 14
-          out[x] = std::min(std::min(r0[x0], r0[x1]), std::min(r1[x0], r1[x1]));
-        } else {  // eq. 16
-          out[x] = std::max(std::max(r0[x0], r0[x1]), std::max(r1[x0], r1[x1]));
-        }
+  auto reduce = [&](auto op) {  // 2x2 blocks; an odd last row or column pairs with itself
+    for (int i = 1; i <= top_level; ++i) {
+      const cv::Mat& src = levels_[i - 1];
+      cv::Mat& dst = levels_[i];
+      const int w = (src.cols + 1) / 2;
+      const int h = (src.rows + 1) / 2;
+      const int full = src.cols / 2;  // blocks with two columns
+      dst.create(h, w, CV_32FC1);
+      for (int y = 0; y < h; ++y) {
+        const float* r0 = src.ptr<float>(2 * y);
+        const float* r1 = 2 * y + 1 < src.rows ? src.ptr<float>(2 * y + 1) : r0;
+        float* out = dst.ptr<float>(y);
+        for (int x = 0; x < full; ++x) out[x] = op(op(r0[2 * x], r0[2 * x + 1]), op(r1[2 * x], r1[2 * x + 1]));
+        if (full < w) out[full] = op(r0[2 * full], r1[2 * full]);
       }
     }
+  };
+  if (type == PyramidType::kMinDisparity) {
+    reduce([](float a, float b) { return b < a ? b : a; });  // eq. 14
+  } else {
+    reduce([](float a, float b) { return a < b ? b : a; });  // eq. 16
   }
 }
 

@@ -79,18 +79,19 @@ LogOddsTable::LogOddsTable(const InverseSensorModel& model, double cell_size_m) 
 RangeProfile LogOddsTable::profile(float l_p_m, float delta_l_m) const {
   RangeProfile p;
   // Height of the peak above 0.5 (eq. 9), capped at p_max - 0.5.
-  const float height = std::min(k_over_sqrt_2pi_ / delta_l_m, peak_max_);
+  const float inv_delta_l = 1.0f / delta_l_m;
+  const float height = std::min(k_over_sqrt_2pi_ * inv_delta_l, peak_max_);
   const float x = height * rows_per_peak_;
   const int r = std::min(static_cast<int>(x), kPeakRows - 1);
   p.row = &values_[static_cast<size_t>(r) * row_length_];
   p.row_length = row_length_;
   p.row_weight = x - static_cast<float>(r);
   p.l_p_m = l_p_m;
-  p.samples_per_m = kSamplesPerSigma / delta_l_m;
+  p.samples_per_m = kSamplesPerSigma * inv_delta_l;
   p.half_cell_m = static_cast<float>(0.5 * cell_size_m_);
   p.front_m = -p.half_cell_m - kFrontSigmas * delta_l_m;
   p.row_origin_m = -kFrontSigmas * delta_l_m;
-  p.tail_m = p.half_cell_m + kTailSigmas * delta_l_m;
+  p.tail_m = tailOf(delta_l_m);
   p.free_log_odds = free_log_odds_;
   return p;
 }
@@ -101,16 +102,18 @@ RangeProfile LogOddsTable::freeProfile() const {
   return p;
 }
 
+RangeProfile measuredProfile(const StereoCameraModel& camera, const LogOddsTable& table, double ray_norm,
+                             float d_px) {
+  const double z = camera.depthFromDisparity(d_px);        // eq. 1
+  const double l_p = z * ray_norm;                         // eqs. 2, 6
+  const double delta_l = camera.rangeUncertainty(z, l_p);  // eqs. 4, 7
+  return table.profile(static_cast<float>(l_p), static_cast<float>(delta_l));
+}
+
 RangeProfile pixelProfile(const StereoCameraModel& camera, const LogOddsTable& table, double x_px, double y_px,
                           float d_px) {
-  // Zero disparity is infinitely far; so is a positive one whose depth is
-  // beyond a thousand times the range (its Δl would overflow).
-  if (!(d_px > 1e-3 * camera.farDisparity())) return table.freeProfile();
-  const double z = camera.depthFromDisparity(d_px);              // eq. 1
-  const double n = camera.rayThroughPixel(x_px, y_px).norm();    // |p_c| / z_c (eq. 2)
-  const double l_p = z * n;                                      // eq. 6
-  const double delta_l = camera.rangeUncertainty(z, l_p);        // eqs. 4, 7
-  return table.profile(static_cast<float>(l_p), static_cast<float>(delta_l));
+  return measuresRange(camera, d_px) ? measuredProfile(camera, table, camera.rayThroughPixel(x_px, y_px).norm(), d_px)
+                                     : table.freeProfile();
 }
 
 }  // namespace stereo_occupancy

@@ -107,7 +107,8 @@ uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vecto
       pb += dtb;
       idx_m += didx_m;
     };
-    for (; k < k_rise; ++k, advance()) put(idx_m + cellA() * sa + cellB() * sb, profile.free_log_odds);
+    const float free_value = profile.free_log_odds;  // a local: stores to the grid cannot change it
+    for (; k < k_rise; ++k, advance()) put(idx_m + cellA() * sa + cellB() * sb, free_value);
     float x = sampleAt(k, hc);
     for (; k < k_peak; ++k, x += dx, advance())
       put(idx_m + cellA() * sa + cellB() * sb, profile.sample(std::max(x, 0.0f)));

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <array>
+#include <cstdint>
+#include <cstring>
 
 namespace stereo_occupancy {
 
@@ -15,8 +17,22 @@ void LocalGrid::reset(const Eigen::Vector3i& origin_index, const Eigen::Vector3i
 void LocalGrid::clear() { std::fill(data_.begin(), data_.end(), kUnknown); }
 
 size_t LocalGrid::countKnown() const {
-  return static_cast<size_t>(
-      std::count_if(data_.begin(), data_.end(), [](float v) { return v != kUnknown; }));
+  // Counted on the bits, in 32-bit lanes that vectorise (a float compare
+  // with a 64-bit count does not); chunks keep the lanes from overflowing.
+  uint32_t unknown_bits;
+  std::memcpy(&unknown_bits, &kUnknown, sizeof unknown_bits);
+  size_t known = 0;
+  for (size_t begin = 0; begin < data_.size(); begin += (1u << 30)) {
+    const size_t end = std::min(data_.size(), begin + (size_t{1} << 30));
+    uint32_t count = 0;
+    for (size_t i = begin; i < end; ++i) {
+      uint32_t bits;
+      std::memcpy(&bits, &data_[i], sizeof bits);
+      count += bits != unknown_bits;
+    }
+    known += count;
+  }
+  return known;
 }
 
 Eigen::AlignedBox3d frustumBoundingBox(const StereoCameraModel& camera, const Eigen::Isometry3d& T_W_C) {

@@ -31,6 +31,7 @@ void RayTracer::traverse(const Eigen::Isometry3d& T_W_C, LocalGrid* grid, DrawSt
   const Eigen::Vector3d C_step_y = R_C_W.col(1) * c;
   const Eigen::Vector3d C_step_z = R_C_W.col(2) * c;
   float* data = grid->data();
+  const RangeProfile free_profile = table_.freeProfile();  // of every cell that sees no range
 
   // Along a row of cells (fixed y, z) the cell centre moves linearly:
   // C_p(x) = A + x·S. In front of the camera, inside the image and within
@@ -88,9 +89,18 @@ void RayTracer::traverse(const Eigen::Isometry3d& T_W_C, LocalGrid* grid, DrawSt
         const double l = std::sqrt(l2);
         const float d_hat = lookup(C_p, u, v, stats);  // step 2c
         if (d_hat < 0.0f) continue;                     // footprint without information
-        const RangeProfile profile = pixelProfile(camera_, table_, u, v, d_hat);  // step 2d
+        // Step 2d. The ray through (u, v) is the cell centre's: |p_c| / z_c = l / z.
+        // A cell behind the measurement is unknown: tested before the profile is built.
         const float l_f = static_cast<float>(l);
-        if (l_f - profile.l_p_m > profile.tail_m) continue;  // behind the measurement: unknown
+        RangeProfile profile = free_profile;
+        if (measuresRange(camera_, d_hat)) {
+          const double z_p = camera_.depthFromDisparity(d_hat);          // eq. 1
+          const double l_p = z_p * (l * inv_z);                           // eqs. 2, 6
+          const float l_p_f = static_cast<float>(l_p);
+          const float delta_l = static_cast<float>(camera_.rangeUncertainty(z_p, l_p));  // eqs. 4, 7
+          if (l_f - l_p_f > table_.tailOf(delta_l)) continue;
+          profile = table_.profile(l_p_f, delta_l);
+        }
         row[x] = profile.at(l_f);                             // step 2e
         ++stats->grid_cells_drawn;
       }
@@ -155,6 +165,12 @@ void RayTracer::drawPyramid(const DisparityPyramid& max_pyramid, const Eigen::Is
     const double s = powerOfTwo(-i);
     const int x0 = floorToInt((u + 0.5) * s - 0.5);
     const int y0 = floorToInt((v + 0.5) * s - 0.5);
+    if (x0 >= 0 && y0 >= 0 && x0 + 1 < level.cols && y0 + 1 < level.rows) {  // inside: no clipping
+      const float* r0 = level.ptr<float>(y0);
+      const float* r1 = level.ptr<float>(y0 + 1);
+      st->used_image_pixels += 4;
+      return std::max(std::max(r0[x0], r0[x0 + 1]), std::max(r1[x0], r1[x0 + 1]));
+    }
     float m = DisparityPyramid::kInvalidMax;
     for (int yy = std::max(y0, 0); yy <= y0 + 1 && yy < level.rows; ++yy) {
       const float* row = level.ptr<float>(yy);

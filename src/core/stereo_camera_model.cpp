@@ -39,7 +39,8 @@ bool StereoCameraConfig::operator==(const StereoCameraConfig& o) const {
 StereoCameraModel::StereoCameraModel(const StereoCameraConfig& config)
     : config_(config),
       bf_(config.baseline_m * config.focal_length_px),
-      inv_f_(1.0 / config.focal_length_px) {
+      inv_f_(1.0 / config.focal_length_px),
+      delta_d_over_bf_(config.delta_d_px / bf_) {
   min_valid_ = std::max(static_cast<float>(config.min_disparity_px), std::numeric_limits<float>::min());
   max_valid_ = static_cast<float>(nearDisparity());
 }
