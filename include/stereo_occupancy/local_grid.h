@@ -9,6 +9,9 @@
 #include <cstdint>
 #include <limits>
 #include <vector>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "stereo_occupancy/stereo_camera_model.h"
 
@@ -71,6 +74,28 @@ class LocalGrid {
   double resolution_m_ = 1.0;
   std::vector<float> data_;
 };
+
+/// Cells tested at once by blockHasInformation().
+constexpr int kInformationBlock = 16;
+
+/// True if one of the kInformationBlock cells from @p cells holds
+/// information: known (not LocalGrid::kUnknown) and not 0. Skips the empty
+/// stretches of a frustum's box 16 cells at a time (SSE2 where available).
+inline bool blockHasInformation(const float* cells) {
+#if defined(__SSE2__)
+  const __m128 unknown = _mm_set1_ps(LocalGrid::kUnknown), zero = _mm_setzero_ps();
+  __m128 hit = zero;
+  for (int j = 0; j < kInformationBlock; j += 4) {
+    const __m128 v = _mm_loadu_ps(cells + j);
+    hit = _mm_or_ps(hit, _mm_and_ps(_mm_cmpneq_ps(v, unknown), _mm_cmpneq_ps(v, zero)));
+  }
+  return _mm_movemask_ps(hit) != 0;
+#else
+  bool hit = false;
+  for (int j = 0; j < kInformationBlock; ++j) hit |= cells[j] != LocalGrid::kUnknown && cells[j] != 0.0f;
+  return hit;
+#endif
+}
 
 /// Axis-aligned bounding box in W of the view frustum cut at the maximum range
 /// (the camera centre, the four corner rays and the spherical cap at

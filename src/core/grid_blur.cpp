@@ -3,9 +3,6 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#if defined(__SSE2__)
-#include <emmintrin.h>
-#endif
 
 namespace stereo_occupancy {
 
@@ -97,31 +94,14 @@ void DistanceDependentBlur::apply(const Eigen::Vector3d& W_camera, LocalGrid* gr
   std::vector<Extent>& e0 = extent_[0];
   e0.assign(rows, Extent{});
   bool any = false;
-  // Blocks of 16 cells tested at once (a vectorisable test), then cell by cell.
-  constexpr int kBlock = 16;
-  auto blockHolds = [](const float* p) {
-#if defined(__SSE2__)
-    const __m128 unknown = _mm_set1_ps(LocalGrid::kUnknown), zero = _mm_setzero_ps();
-    __m128 hit = zero;
-    for (int j = 0; j < kBlock; j += 4) {
-      const __m128 v = _mm_loadu_ps(p + j);
-      hit = _mm_or_ps(hit, _mm_and_ps(_mm_cmpneq_ps(v, unknown), _mm_cmpneq_ps(v, zero)));
-    }
-    return _mm_movemask_ps(hit) != 0;
-#else
-    bool hit = false;
-    for (int j = 0; j < kBlock; ++j) hit |= p[j] != LocalGrid::kUnknown && p[j] != 0.0f;
-    return hit;
-#endif
-  };
   for (int r = 0; r < rows; ++r) {
     const float* row = data + static_cast<int64_t>(nx) * r;
     int lo = 0;
-    while (lo + kBlock <= nx && !blockHolds(row + lo)) lo += kBlock;
+    while (lo + kInformationBlock <= nx && !blockHasInformation(row + lo)) lo += kInformationBlock;
     while (lo < nx && known(row[lo]) == 0.0f) ++lo;
     if (lo == nx) continue;
     int hi = nx;
-    while (hi - kBlock >= lo && !blockHolds(row + hi - kBlock)) hi -= kBlock;
+    while (hi - kInformationBlock >= lo && !blockHasInformation(row + hi - kInformationBlock)) hi -= kInformationBlock;
     while (hi > lo && known(row[hi - 1]) == 0.0f) --hi;
     e0[r] = Extent{lo, hi};
     any = true;

@@ -40,12 +40,15 @@ void encodeGridUpdate(const LocalGrid& grid, const Eigen::Vector3d& W_sensor_ori
   update->log_odds.clear();
   const float* data = grid.data();
   const size_t n = grid.numCells();
+  auto informative = [](float v) { return v != LocalGrid::kUnknown && v != 0.0f; };
   size_t i = 0;
   while (i < n) {
-    while (i < n && (data[i] == LocalGrid::kUnknown || data[i] == 0.0f)) ++i;
+    while (i + kInformationBlock <= n && !blockHasInformation(data + i)) i += kInformationBlock;  // empty space
+    while (i < n && !informative(data[i])) ++i;
     if (i == n) break;
     const size_t start = i;
-    while (i < n && data[i] != LocalGrid::kUnknown && data[i] != 0.0f) update->log_odds.push_back(data[i++]);
+    while (i < n && informative(data[i])) ++i;
+    update->log_odds.insert(update->log_odds.end(), data + start, data + i);
     update->run_start.push_back(static_cast<uint32_t>(start));
     update->run_length.push_back(static_cast<uint32_t>(i - start));
   }
