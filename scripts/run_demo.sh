@@ -7,6 +7,7 @@
 # line is "map: <path of the .bt file>".
 #
 #   SCENARIO=posts|houses|forest|wires (default posts)   SEED=1   OUT=build/demo
+#   CONFIG=<parameters file> (default config/mapping.yaml)
 set -euo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 ws="${WS:-$repo/build/ws}"
@@ -35,7 +36,7 @@ set +u
 source "$ws/devel/setup.bash"
 set -u
 echo "replaying $bag through DisparityMapper and OctomapAccumulator (launch/replay.launch) ..."
-roslaunch stereo_occupancy replay.launch bag:="$bag" save_dir:="$map_dir" >"$out/replay_$scenario.log" 2>&1 || {
+roslaunch stereo_occupancy replay.launch bag:="$bag" save_dir:="$map_dir" config:="${CONFIG:-$repo/config/mapping.yaml}" >"$out/replay_$scenario.log" 2>&1 || {
   tail -30 "$out/replay_$scenario.log"
   exit 1
 }

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "stereo_occupancy/disparity_drawer.h"
+#include "stereo_occupancy/flight_simulation.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
 #include "stereo_occupancy/synthetic_scene.h"
@@ -60,7 +61,8 @@ const char* kStages =
 
 int run(int argc, char** argv) {
   int repeat = 21;
-  std::string only;
+  std::string only, scenario_name;
+  long frame = 0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--repeat") {
@@ -69,10 +71,15 @@ int run(int argc, char** argv) {
       only = so::tools::nextValue(argc, argv, &i);
       if (std::string(", ").append(kStages).append(",").find(", " + only + ",") == std::string::npos)
         throw so::tools::UsageError("unknown stage '" + only + "' (one of " + kStages + ")");
+    } else if (a == "--scenario") {
+      scenario_name = so::tools::nextValue(argc, argv, &i);
+    } else if (a == "--frame") {
+      frame = so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 0, 1000000);
     } else if (a == "--help") {
-      std::cout << "usage: performance [--repeat N] [--only STAGE]\n"
-                   "Times the mapper's stages on the Table I frame at 0.25 m (median and min-max of N runs, "
-                   "default 21) and OctoMap's insertPointCloud on the same frame.\n"
+      std::cout << "usage: performance [--repeat N] [--only STAGE] [--scenario NAME [--frame K]]\n"
+                   "Times the mapper's stages on the Table I frame (or frame K of a simulated flight, with its "
+                   "stereo effects, seed 1) at 0.25 m (median and min-max of N runs, default 21) and OctoMap's "
+                   "insertPointCloud on the same frame.\n"
                    "STAGE: "
                 << kStages << "\n";
       return 0;
@@ -85,10 +92,22 @@ int run(int argc, char** argv) {
 
   so::StereoCameraConfig camera;  // the paper's camera
   Eigen::Isometry3d T_W_C;
-  const cv::Mat image = so::table1Image(so::StereoCameraModel(camera), &T_W_C);
+  cv::Mat image;
+  std::string frame_name = "Table I frame";
+  if (scenario_name.empty()) {
+    image = so::table1Image(so::StereoCameraModel(camera), &T_W_C);
+  } else {
+    const so::FlightScenario scenario = so::tools::scenarioNamed(scenario_name);
+    if (frame >= static_cast<long>(scenario.T_W_B.size()))
+      throw so::tools::UsageError("--frame: the flight has " + std::to_string(scenario.T_W_B.size()) + " frames");
+    camera = scenario.camera;
+    T_W_C = scenario.cameraPose(static_cast<size_t>(frame));
+    image = so::renderStereoFrame(scenario, static_cast<size_t>(frame), 1);
+    frame_name = "Frame " + std::to_string(frame) + " of flight '" + scenario_name + "'";
+  }
   const double resolution = 0.25;
   if (!quiet)
-    std::cout << "Table I frame: 640x480, b = 0.3 m, f = 700 px, 25 m range, " << resolution
+    std::cout << frame_name << ": 640x480, b = 0.3 m, f = 700 px, 25 m range, " << resolution
               << " m cells; one thread; median (min-max) of " << repeat << " runs [ms].\n\n"
               << "| stage | time ms | what is timed |\n|---|---:|---|\n";
   auto row = [&](const std::string& stage, const Timing& t, const std::string& what) {
