@@ -132,8 +132,7 @@ int run(int argc, char** argv) {
     row(name, t, "pyramids + drawing");
   }
 
-  if (!(wanted("line_pyramid") || wanted("blur") || wanted("encode") || wanted("fusion") || wanted("octomap")))
-    return 0;
+  if (!(only.empty() || only == "blur" || only == "encode" || only == "fusion" || only == "octomap")) return 0;
   // The grid the later stages start from: line_pyramid's, as the mapper's.
   so::DrawingConfig config;
   config.algorithm = so::DrawingAlgorithm::kLinePyramid;
@@ -144,7 +143,7 @@ int run(int argc, char** argv) {
   so::LocalGrid drawn;
   drawer.prepareGrid(T_W_C, &drawn);  // padded for the blur
   drawer.drawInto(image, T_W_C, &drawn);
-  if (wanted("line_pyramid")) {
+  if (only.empty()) {
     so::LocalGrid grid;
     row("grid preparation", timeIt(repeat, [] {}, [&] { drawer.prepareGrid(T_W_C, &grid); }),
         "shape the frustum's box (padded for the blur) and set it unknown; " + std::to_string(drawn.numCells()) +
