@@ -77,7 +77,7 @@ class DistanceDependentBlur {
   std::vector<Extent> extent_[4];
   std::vector<KernelRun> runs_;     ///< per row, over its final extent
   std::vector<uint32_t> row_runs_;  ///< row r's runs are runs_[row_runs_[r] .. row_runs_[r + 1])
-  std::vector<int> sigma_index_;  ///< q along one row
+  std::vector<double> thresholds_;  ///< per q: the smallest r² whose rounded σ is q [m²]
   std::vector<float> scratch_;
   std::vector<float> buffer_a_;
   std::vector<float> buffer_b_;

@@ -164,21 +164,56 @@ void DistanceDependentBlur::apply(const Eigen::Vector3d& W_camera, LocalGrid* gr
   grow(e2, 2, &e3);
 
   // Runs of one kernel over each row's final extent (which holds the others).
+  // q grows with r², and along a row r² falls up to the camera's x and grows
+  // after it: the runs' ends are found by bisection against the smallest r²
+  // of each q (itself bisected over the doubles, so q is exactly
+  // sigmaIndex(r²)), without a square root per cell.
+  thresholds_.assign(q_max + 1, 0.0);
+  for (int q = 1; q <= q_max; ++q) {
+    double lo = 0.0, hi = r2_max;  // sigmaIndex(hi) >= q
+    if (sigmaIndex(lo) >= q) {
+      hi = lo;
+    } else {
+      for (;;) {
+        const double mid = lo + 0.5 * (hi - lo);
+        if (!(mid > lo && mid < hi)) break;  // adjacent doubles
+        (sigmaIndex(mid) >= q ? hi : lo) = mid;
+      }
+    }
+    thresholds_[q] = hi;
+  }
+  auto qAt = [&](int x, double yz2) {
+    const double r2 = squares[0][x] + yz2;
+    int q = 0;
+    while (q < q_max && r2 >= thresholds_[q + 1]) ++q;
+    return q;
+  };
+  // First x whose cell centre is not behind the camera's x: r² falls before it.
+  int x_turn = 0;
+  while (x_turn < nx && (grid->originIndex().x() + x_turn + 0.5) * c - W_camera.x() < 0.0) ++x_turn;
   runs_.clear();
   row_runs_.assign(rows + 1, 0);
-  sigma_index_.resize(nx);
   for (int z = 0; z < nz; ++z)
     for (int y = 0; y < ny; ++y) {
       const int r = y + ny * z;
       row_runs_[r] = static_cast<uint32_t>(runs_.size());
       const double yz2 = squares[1][y] + squares[2][z];
       const int lo = e3[r].lo, hi = e3[r].hi;
-      for (int x = lo; x < hi; ++x) sigma_index_[x] = sigmaIndex(squares[0][x] + yz2);  // vectorisable
-      for (int x = lo; x < hi; ++x) {
-        if (x > lo && runs_.back().q == sigma_index_[x]) {
-          runs_.back().end = x + 1;
-        } else {
-          runs_.push_back(KernelRun{x, x + 1, sigma_index_[x]});
+      const int turn = std::clamp(x_turn, lo, hi);
+      for (const auto& [begin, end] : {std::make_pair(lo, turn), std::make_pair(turn, hi)}) {
+        for (int x = begin; x < end;) {  // q is monotonic on [begin, end)
+          const int q = qAt(x, yz2);
+          int first = x + 1, last = end;  // bisect for the first x with another q
+          while (first < last) {
+            const int mid = first + (last - first) / 2;
+            if (qAt(mid, yz2) == q) {
+              first = mid + 1;
+            } else {
+              last = mid;
+            }
+          }
+          runs_.push_back(KernelRun{x, first, q});
+          x = first;
         }
       }
     }

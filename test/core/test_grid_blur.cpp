@@ -148,7 +148,10 @@ void referenceBlur(DistanceDependentBlur* blur, const Eigen::Vector3d& W_camera,
 // drawn frame whose σ spans several kernels: the same cells, bit for bit
 // (each cell's taps are added in the same order).
 TEST(DistanceDependentBlur, EqualsThePlainBlurOnADrawnFrame) {
-  for (const double res : {0.25, 0.5}) {
+  // Looking along +x, and along +y from (3, -4, 1.5): then the rows along x
+  // pass the camera, and σ falls towards it and grows after it in one row.
+  const std::pair<double, double> cases[] = {{0.25, 0.0}, {0.5, 0.0}, {0.25, M_PI / 2}};
+  for (const auto& [res, yaw] : cases) {
     StereoCameraConfig camera;
     DrawingConfig config;
     config.algorithm = DrawingAlgorithm::kLinePyramid;
@@ -158,6 +161,7 @@ TEST(DistanceDependentBlur, EqualsThePlainBlurOnADrawnFrame) {
     DisparityDrawer drawer(camera, config);
     Eigen::Isometry3d T_W_C;
     const cv::Mat image = table1Image(StereoCameraModel(camera), &T_W_C);
+    if (yaw != 0.0) T_W_C = lookingAlongX(Eigen::Vector3d(3.0, -4.0, 1.5), yaw);
     LocalGrid drawn;
     drawer.prepareGrid(T_W_C, &drawn);
     drawer.drawInto(image, T_W_C, &drawn);
