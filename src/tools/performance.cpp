@@ -55,13 +55,49 @@ Timing timeIt(int repeats, const std::function<void()>& setup, const std::functi
   return t;
 }
 
+/// The core of the mapper's path (shape and clear the grid, pyramids,
+/// drawing, blur as configured: off by default, encoding) on every frame of
+/// a simulated flight, per algorithm: the nodelet's work without ROS.
+int flightPath(const std::string& scenario_name) {
+  const so::FlightScenario scenario = so::tools::scenarioNamed(scenario_name);
+  std::vector<cv::Mat> images;
+  for (size_t i = 0; i < scenario.T_W_B.size(); ++i) images.push_back(so::renderStereoFrame(scenario, i, 1));
+  std::cout << "Flight '" << scenario_name << "': " << images.size()
+            << " frames, 640x480, 0.25 m cells, 25 m range, the mapper's defaults (no blur); one thread.\n"
+               "Per frame: grid preparation + pyramids + drawing + encoding [ms].\n\n"
+               "| algorithm | mean | median | p99 | max |\n|---|---:|---:|---:|---:|\n";
+  for (so::DrawingAlgorithm algorithm : {so::DrawingAlgorithm::kLinePyramid, so::DrawingAlgorithm::kRayTracePyramid,
+                                         so::DrawingAlgorithm::kLinePyramidBounded}) {
+    so::DrawingConfig config;
+    config.algorithm = algorithm;
+    so::DisparityDrawer drawer(scenario.camera, config);
+    so::LocalGrid grid;
+    so::GridUpdate update;
+    std::vector<double> ms;
+    for (size_t i = 0; i < images.size(); ++i) {
+      const Eigen::Isometry3d T_W_C = scenario.cameraPose(i);
+      const auto t0 = Clock::now();
+      drawer.draw(images[i], T_W_C, &grid);
+      so::encodeGridUpdate(grid, T_W_C.translation(), &update);
+      ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+    }
+    double sum = 0.0;
+    for (double v : ms) sum += v;
+    std::sort(ms.begin(), ms.end());
+    std::cout << std::fixed << std::setprecision(2) << "| " << so::toString(algorithm) << " | " << sum / ms.size()
+              << " | " << ms[ms.size() / 2] << " | " << ms[std::min(ms.size() - 1, ms.size() * 99 / 100)] << " | "
+              << ms.back() << " |" << std::endl;
+  }
+  return 0;
+}
+
 const char* kStages =
     "line, line_pyramid, raytrace, raytrace_pyramid, line_pyramid_bounded, raytrace_pyramid_bounded, blur, "
     "encode, fusion, octomap";
 
 int run(int argc, char** argv) {
   int repeat = 21;
-  std::string only, scenario_name;
+  std::string only, scenario_name, flight;
   long frame = 0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -73,13 +109,17 @@ int run(int argc, char** argv) {
         throw so::tools::UsageError("unknown stage '" + only + "' (one of " + kStages + ")");
     } else if (a == "--scenario") {
       scenario_name = so::tools::nextValue(argc, argv, &i);
+    } else if (a == "--flight") {
+      flight = so::tools::nextValue(argc, argv, &i);
     } else if (a == "--frame") {
       frame = so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 0, 1000000);
     } else if (a == "--help") {
-      std::cout << "usage: performance [--repeat N] [--only STAGE] [--scenario NAME [--frame K]]\n"
+      std::cout << "usage: performance [--repeat N] [--only STAGE] [--scenario NAME [--frame K]] | --flight NAME\n"
                    "Times the mapper's stages on the Table I frame (or frame K of a simulated flight, with its "
                    "stereo effects, seed 1) at 0.25 m (median and min-max of N runs, default 21) and OctoMap's "
                    "insertPointCloud on the same frame.\n"
+                   "--flight NAME: the core of the mapper's path on every frame of a simulated flight, with its "
+                   "mean, median, p99 and maximum.\n"
                    "STAGE: "
                 << kStages << "\n";
       return 0;
@@ -87,6 +127,7 @@ int run(int argc, char** argv) {
       throw so::tools::UsageError("unknown option '" + a + "'");
     }
   }
+  if (!flight.empty()) return flightPath(flight);
   const bool quiet = !only.empty();
   auto wanted = [&](const std::string& stage) { return only.empty() || only == stage; };
 
