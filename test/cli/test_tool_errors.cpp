@@ -83,7 +83,7 @@ TEST(ToolErrors, SimulateFlight) {
   expectError("simulate_flight", {tool + " --scenario posts --frames 1 --output /nonexistent/dir/x.bag"}, 1);
 }
 
-TEST(ToolErrors, CompareTable1AndFigures) {
+TEST(ToolErrors, BenchmarksAndFigures) {
   const std::string compare = COMPARE_OCTOMAP_EXE, table1 = TABLE1_EXE, figures = MAKE_FIGURES_EXE;
   expectError("compare_octomap",
               {compare + " --scenario mars", compare + " --frame-step x", compare + " --frame-step 0",
@@ -91,6 +91,12 @@ TEST(ToolErrors, CompareTable1AndFigures) {
               2);
   expectError("table1", {table1 + " --repeat 0", table1 + " --repeat x", table1 + " --frobnicate"}, 2);
   expectError("scaling", {std::string(SCALING_EXE) + " --repeat 0", std::string(SCALING_EXE) + " --frobnicate"}, 2);
+  const std::string performance = PERFORMANCE_EXE;
+  expectError("performance",
+              {performance + " --repeat 0", performance + " --only warp_drive", performance + " --scenario mars",
+               performance + " --scenario posts --frame 100000", performance + " --flight mars",
+               performance + " --frobnicate"},
+              2);
   expectError("make_figures", {figures + " a b", figures + " --frobnicate"}, 2);
   expectError("make_figures", {figures + " /nonexistent/dir"}, 1);
 }
