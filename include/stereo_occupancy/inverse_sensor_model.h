@@ -154,9 +154,22 @@ inline bool measuresRange(const StereoCameraModel& camera, float d_px) {
   return d_px > 1e-3 * camera.farDisparity();
 }
 
+/// A measurement along its ray: range l_p and its uncertainty Δl.
+struct MeasuredRange {
+  float l_p_m;      ///< l_p [m] (eq. 6)
+  float delta_l_m;  ///< Δl_p [m] (eq. 7)
+};
+
+/// The range of disparity d > 0 (measuresRange() holds) along a ray with
+/// @p ray_norm = |p_c| / z_c (eq. 2: the norm of (x - c_x, y - c_y, f) / f).
+inline MeasuredRange measuredRange(const StereoCameraModel& camera, double ray_norm, float d_px) {
+  const double z = camera.depthFromDisparity(d_px);  // eq. 1
+  const double l_p = z * ray_norm;                   // eqs. 2, 6
+  return {static_cast<float>(l_p), static_cast<float>(camera.rangeUncertainty(z, l_p))};  // eqs. 4, 7
+}
+
 /// The profile of L̂ along a pixel's ray for a disparity d > 0 for which
-/// measuresRange() holds (eqs. 1, 2, 4, 6, 7); @p ray_norm is |p_c| / z_c of
-/// the ray (eq. 2: the norm of (x - c_x, y - c_y, f) / f).
+/// measuresRange() holds; @p ray_norm as for measuredRange().
 RangeProfile measuredProfile(const StereoCameraModel& camera, const LogOddsTable& table, double ray_norm,
                              float d_px);
 

@@ -104,10 +104,8 @@ RangeProfile LogOddsTable::freeProfile() const {
 
 RangeProfile measuredProfile(const StereoCameraModel& camera, const LogOddsTable& table, double ray_norm,
                              float d_px) {
-  const double z = camera.depthFromDisparity(d_px);        // eq. 1
-  const double l_p = z * ray_norm;                         // eqs. 2, 6
-  const double delta_l = camera.rangeUncertainty(z, l_p);  // eqs. 4, 7
-  return table.profile(static_cast<float>(l_p), static_cast<float>(delta_l));
+  const MeasuredRange m = measuredRange(camera, ray_norm, d_px);
+  return table.profile(m.l_p_m, m.delta_l_m);
 }
 
 RangeProfile pixelProfile(const StereoCameraModel& camera, const LogOddsTable& table, double x_px, double y_px,

@@ -94,12 +94,9 @@ void RayTracer::traverse(const Eigen::Isometry3d& T_W_C, LocalGrid* grid, DrawSt
         const float l_f = static_cast<float>(l);
         RangeProfile profile = free_profile;
         if (measuresRange(camera_, d_hat)) {
-          const double z_p = camera_.depthFromDisparity(d_hat);          // eq. 1
-          const double l_p = z_p * (l * inv_z);                           // eqs. 2, 6
-          const float l_p_f = static_cast<float>(l_p);
-          const float delta_l = static_cast<float>(camera_.rangeUncertainty(z_p, l_p));  // eqs. 4, 7
-          if (l_f - l_p_f > table_.tailOf(delta_l)) continue;
-          profile = table_.profile(l_p_f, delta_l);
+          const MeasuredRange m = measuredRange(camera_, l * inv_z, d_hat);
+          if (l_f - m.l_p_m > table_.tailOf(m.delta_l_m)) continue;
+          profile = table_.profile(m.l_p_m, m.delta_l_m);
         }
         row[x] = profile.at(l_f);                             // step 2e
         ++stats->grid_cells_drawn;
