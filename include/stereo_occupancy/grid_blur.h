@@ -46,6 +46,7 @@ class DistanceDependentBlur {
 
   /// Cells to add around a grid so that blur at range r does not hit its border.
   int paddingCells(double max_range_m, double resolution_m) const;
+  static constexpr int kMaxPaddingCells = 1 << 20;  ///< paddingCells() at most
 
   /// Blurs @p grid in place; W_camera is the camera centre in W [m].
   void apply(const Eigen::Vector3d& W_camera, LocalGrid* grid);

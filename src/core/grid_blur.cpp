@@ -28,7 +28,10 @@ double DistanceDependentBlur::sigmaAt(double r_m) const {
 
 int DistanceDependentBlur::paddingCells(double max_range_m, double resolution_m) const {
   if (!config_.enabled()) return 0;
-  return static_cast<int>(std::ceil(config_.truncate_sigmas * sigmaAt(max_range_m) / resolution_m)) + 1;
+  // Capped, so that an absurd σ cannot overflow the int; a grid padded that
+  // much exceeds any max_grid_cells and is refused.
+  const double cells = std::ceil(config_.truncate_sigmas * sigmaAt(max_range_m) / resolution_m) + 1.0;
+  return cells < kMaxPaddingCells ? static_cast<int>(cells) : kMaxPaddingCells;
 }
 
 const std::vector<float>& DistanceDependentBlur::kernel(int q) {

@@ -210,3 +210,17 @@ TEST(DistanceDependentBlur, RowThroughTheCameraEqualsThePlainBlur) {
   }
   EXPECT_GT(changed, grid.numCells() / 2);
 }
+
+// An absurd σ (found by the fuzzer: σ_trans of 1e25 m) gives a capped
+// padding, not an int overflow, and the drawer refuses the grid it would need.
+TEST(DistanceDependentBlur, AbsurdSigmaCapsThePadding) {
+  BlurConfig cfg;
+  cfg.sigma_trans_m = 1e25;
+  ASSERT_TRUE(cfg.isValid());
+  EXPECT_EQ(DistanceDependentBlur(cfg).paddingCells(25.0, 0.25), DistanceDependentBlur::kMaxPaddingCells);
+  DrawingConfig drawing;
+  drawing.blur = cfg;
+  DisparityDrawer drawer(StereoCameraConfig{}, drawing);
+  LocalGrid grid;
+  EXPECT_THROW(drawer.prepareGrid(Eigen::Isometry3d::Identity(), &grid), std::invalid_argument);
+}
