@@ -97,8 +97,13 @@ class PyramidLevelTable {
     return i < min_level_ ? min_level_ : (i > top_level_ ? top_level_ : i);
   }
 
-  /// Lowest level used: min(0, level of the maximum range); < 0 means eq. 15 enlargements.
+  /// Lowest level used: min(0, level of the maximum range), at least -16; < 0 means eq. 15 enlargements.
   int minLevel() const { return min_level_; }
+  /// Lowest minLevel() a DisparityDrawer accepts for pyramidal line drawing
+  /// (ray tracing reads level i < 0 per cell at no extra cost): level i < 0 draws 4^-i lines
+  /// per pixel, so a grid far finer than the pixels' spacing at the maximum
+  /// range would cost without bound. -3 is 8 x 8 lines per pixel.
+  static constexpr int kLowestLevel = -3;
   /// Highest level worth building: that of the minimum range's disparity, at
   /// most the level where the image shrinks to one pixel.
   int topLevel() const { return top_level_; }

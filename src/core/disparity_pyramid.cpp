@@ -53,7 +53,10 @@ PyramidLevelTable::PyramidLevelTable(const StereoCameraModel& camera, double cel
     : c_over_b_(static_cast<float>(cell_size_m / camera.config().baseline_m)),
       far_disparity_(static_cast<float>(camera.farDisparity())),
       cell_f_px_m_(cell_size_m * camera.config().focal_length_px) {
-  min_level_ = std::min(0, std::ilogb(far_disparity_ * c_over_b_));
+  // At most 16 enlargement levels (2^-16 px, far below any use): eq. 15's
+  // shifts and the level sizes stay within an int, also where c·d/b
+  // underflows to 0 (ilogb(0) = INT_MIN).
+  min_level_ = std::clamp(std::ilogb(far_disparity_ * c_over_b_), -16, 0);
   const int size_limit =
       std::ilogb(static_cast<double>(std::max(camera.config().width_px, camera.config().height_px)));
   // The nearest range, not the message's search range: drawing the same scene

@@ -141,4 +141,15 @@ TEST(PyramidLevelTable, Fig3LevelsAndFarRange) {
   const PyramidLevelTable t01(StereoCameraModel(far), 0.1);
   EXPECT_EQ(t01.minLevel(), -1);  // c·f/R = 0.7 px
   EXPECT_EQ(t01.levelForDisparity(0.0f), -1);
+
+  // c·f/R = 2^-20 -> -20, capped at -16; one that underflows a float to 0
+  // (ilogb(0) = INT_MIN, found by the fuzzer) likewise.
+  StereoCameraConfig tiny = StereoCameraConfig();
+  tiny.focal_length_px = std::ldexp(1.0, -20) * 25.0 / 0.1;
+  EXPECT_EQ(PyramidLevelTable(StereoCameraModel(tiny), 0.1).minLevel(), -16);
+  tiny.focal_length_px = 1e-40;
+  const PyramidLevelTable underflow(StereoCameraModel(tiny), 0.1);
+  EXPECT_EQ(underflow.minLevel(), -16);
+  EXPECT_EQ(underflow.levelForDisparity(0.0f), -16);
+  EXPECT_EQ(underflow.levelForDepth(25.0), -16);
 }

@@ -428,11 +428,36 @@ TEST(Drawing, RejectsBadInput) {
   // A fine grid over a long range is refused before it is allocated.
   StereoCameraConfig far_cam = cam_cfg;
   far_cam.max_range_m = 200.0;
-  DrawingConfig fine = config(DrawingAlgorithm::kLinePyramid, 0.01);
+  DrawingConfig fine = config(DrawingAlgorithm::kRayTracePyramid, 0.01);
   DisparityDrawer huge(far_cam, fine);
   EXPECT_THROW(huge.draw(cv::Mat(480, 640, CV_32FC1, cv::Scalar(0)), T, &grid), std::invalid_argument);
   DrawingAlgorithm parsed;
   EXPECT_TRUE(parseDrawingAlgorithm("raytrace_pyramid", &parsed));
   EXPECT_EQ(parsed, DrawingAlgorithm::kRayTracePyramid);
   EXPECT_FALSE(parseDrawingAlgorithm("bresenham", &parsed));
+}
+
+// Pyramidal line drawing below level 0 draws 4^-i lines per pixel (eq. 15): a
+// grid much finer than the pixels' spacing at the maximum range is refused
+// when the drawer is built (found by the fuzzer: level -20 never finished),
+// ray tracing (a constant cost per cell at any level) is not.
+TEST(Drawing, RefusesLinePyramidsFinerThanEightByEightLinesPerPixel) {
+  StereoCameraConfig cam;  // f = 700 px
+  cam.max_range_m = 200.0;
+  // Level of the maximum range: floor(log2(c·f/z)); c·f/z = 0.105 -> -4, 0.126 -> -3.
+  for (DrawingAlgorithm a : {DrawingAlgorithm::kLinePyramid, DrawingAlgorithm::kLinePyramidBounded}) {
+    SCOPED_TRACE(toString(a));
+    try {
+      DisparityDrawer refused(cam, config(a, 0.03));
+      ADD_FAILURE() << "level -4 accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("4^4 lines per pixel"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("at least 0.035714 m"), std::string::npos) << e.what();  // 200 / 700 / 8
+    }
+    DisparityDrawer accepted(cam, config(a, 0.036));
+    EXPECT_EQ(accepted.levelTable().minLevel(), PyramidLevelTable::kLowestLevel);
+  }
+  for (DrawingAlgorithm a : {DrawingAlgorithm::kLine, DrawingAlgorithm::kRayTrace, DrawingAlgorithm::kRayTracePyramid,
+                             DrawingAlgorithm::kRayTracePyramidBounded})
+    EXPECT_NO_THROW(DisparityDrawer(cam, config(a, 0.03))) << toString(a);
 }
