@@ -17,8 +17,15 @@ std::unique_ptr<octomap::OcTree> localGridToOcTree(const LocalGrid& grid);
 
 /// Writes @p tree to @p path: ".ot" keeps the log-odds (octomap::AbstractOcTree::write),
 /// ".bt" keeps occupied / free only (writeBinary). Atomic: written to a
-/// temporary file in the same directory, then renamed into place.
+/// temporary file in the same directory (path + ".tmp" + the process id), then
+/// renamed into place; first removes the temporaries that killed writers left
+/// (removeStaleTemporaries).
 /// @throws std::runtime_error.
 void writeOcTree(const octomap::OcTree& tree, const std::string& path);
+
+/// Removes the files path + ".tmp" + PID in @p path's directory whose process
+/// PID no longer exists (left by a writer killed during writeOcTree).
+/// @return how many were removed.
+int removeStaleTemporaries(const std::string& path);
 
 }  // namespace stereo_occupancy
