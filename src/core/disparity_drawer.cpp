@@ -91,12 +91,12 @@ DisparityDrawer::DisparityDrawer(const StereoCameraConfig& camera, const Drawing
     // Eq. 13 at the maximum range needs c >= 2^i·z/f; at i = kLowestLevel:
     const double finest_m = std::ldexp(camera_.config().max_range_m / camera_.config().focal_length_px,
                                        PyramidLevelTable::kLowestLevel);
-    throw std::invalid_argument(
-        "drawing: resolution_m = " + std::to_string(config_.resolution_m) + " is too fine for this camera at max_range_m = " +
-        std::to_string(camera_.config().max_range_m) + ": it would draw 4^" +
-        std::to_string(-levels_.minLevel()) + " lines per pixel (eq. 15, level " + std::to_string(levels_.minLevel()) +
-        "); raise resolution_m to at least " +
-        std::to_string(finest_m) + " m or lower max_range_m");
+    throw std::invalid_argument("drawing: resolution_m = " + std::to_string(config_.resolution_m) +
+                                " is too fine for this camera at max_range_m = " +
+                                std::to_string(camera_.config().max_range_m) + ": it would draw 4^" +
+                                std::to_string(-levels_.minLevel()) + " lines per pixel (eq. 15, level " +
+                                std::to_string(levels_.minLevel()) + "); raise resolution_m to at least " +
+                                std::to_string(finest_m) + " m or lower max_range_m");
   }
   if (config_.algorithm == DrawingAlgorithm::kLinePyramidBounded ||
       config_.algorithm == DrawingAlgorithm::kRayTracePyramidBounded)
