@@ -1,6 +1,6 @@
 #pragma once
 // Timing of one drawing algorithm on one image, shared by the benchmarks
-// (table1, scaling).
+// (table1, scaling, performance).
 
 #include <algorithm>
 #include <chrono>
@@ -10,6 +10,14 @@
 
 namespace stereo_occupancy {
 namespace tools {
+
+/// The default drawing configuration with @p algorithm at @p resolution_m.
+inline DrawingConfig drawingConfig(DrawingAlgorithm algorithm, double resolution_m) {
+  DrawingConfig config;
+  config.algorithm = algorithm;
+  config.resolution_m = resolution_m;
+  return config;
+}
 
 /// Draws @p image @p repeats times into @p grid and returns the times [ms],
 /// sorted; @p stats holds the last run's counters. With

@@ -23,6 +23,7 @@
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
 #include "stereo_occupancy/synthetic_scene.h"
+#include "drawing_benchmark.h"
 #include "tool_support.h"
 
 namespace so = stereo_occupancy;
@@ -160,10 +161,7 @@ int run(int argc, char** argv) {
   for (so::DrawingAlgorithm algorithm : so::allDrawingAlgorithms()) {
     const std::string name = so::toString(algorithm);
     if (!wanted(name)) continue;
-    so::DrawingConfig config;
-    config.algorithm = algorithm;
-    config.resolution_m = resolution;
-    so::DisparityDrawer drawer(camera, config);
+    so::DisparityDrawer drawer(camera, so::tools::drawingConfig(algorithm, resolution));
     so::LocalGrid grid;
     const bool slow = algorithm == so::DrawingAlgorithm::kLine || algorithm == so::DrawingAlgorithm::kRayTrace;
     const Timing t = timeIt(
@@ -175,9 +173,7 @@ int run(int argc, char** argv) {
 
   if (!(only.empty() || only == "blur" || only == "encode" || only == "fusion" || only == "octomap")) return 0;
   // The grid the later stages start from: line_pyramid's, as the mapper's.
-  so::DrawingConfig config;
-  config.algorithm = so::DrawingAlgorithm::kLinePyramid;
-  config.resolution_m = resolution;
+  so::DrawingConfig config = so::tools::drawingConfig(so::DrawingAlgorithm::kLinePyramid, resolution);
   config.blur.sigma_trans_m = 0.1;
   config.blur.sigma_angle_rad = 0.01;
   so::DisparityDrawer drawer(camera, config);

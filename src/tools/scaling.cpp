@@ -39,10 +39,7 @@ void row(const so::StereoCameraConfig& camera, double resolution, int repeat) {
   Eigen::Isometry3d T_W_C;
   const cv::Mat image = sceneImage(camera, &T_W_C);
   for (so::DrawingAlgorithm algorithm : so::allDrawingAlgorithms()) {
-    so::DrawingConfig config;
-    config.algorithm = algorithm;
-    config.resolution_m = resolution;
-    so::DisparityDrawer drawer(camera, config);
+    so::DisparityDrawer drawer(camera, so::tools::drawingConfig(algorithm, resolution));
     so::LocalGrid grid;
     so::DrawStatistics stats;
     const bool plain = algorithm == so::DrawingAlgorithm::kLine || algorithm == so::DrawingAlgorithm::kRayTrace;
