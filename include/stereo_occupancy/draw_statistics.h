@@ -17,7 +17,8 @@ struct DrawStatistics {
   uint64_t used_image_pixels = 0;
   /// Occupancy values computed and written to a cell (a cell may be written many times).
   uint64_t grid_cells_drawn = 0;
-  /// Cells holding a value at the end (before blurring).
+  /// Cells holding a value at the end (before blurring); counted only when
+  /// DrawingConfig::count_different_cells is set, 0 otherwise.
   uint64_t different_grid_cells = 0;
 };
 

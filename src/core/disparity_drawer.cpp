@@ -157,7 +157,7 @@ DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::
       ray_tracer_.drawPyramidBounded(second_pyramid_, pyramid_, *bound_, T_W_C, grid, &stats);
       break;
   }
-  stats.different_grid_cells = grid->countKnown();
+  if (config_.count_different_cells) stats.different_grid_cells = grid->countKnown();
   return stats;
 }
 

@@ -133,6 +133,7 @@ int run(int argc, char** argv) {
   drawing.resolution_m = o.resolution;
   drawing.blur.sigma_trans_m = o.sigma_trans;
   drawing.blur.sigma_angle_rad = o.sigma_angle;
+  drawing.count_different_cells = true;  // printed with the other Table I counters
   if (!o.output.empty() && o.output.size() < 3) throw std::invalid_argument("--output must end in .ot or .bt");
 
   const cv::Mat disparity = so::readDisparity(o.disparity, o.disparity_scale);

@@ -39,7 +39,9 @@ void row(const so::StereoCameraConfig& camera, double resolution, int repeat) {
   Eigen::Isometry3d T_W_C;
   const cv::Mat image = sceneImage(camera, &T_W_C);
   for (so::DrawingAlgorithm algorithm : so::allDrawingAlgorithms()) {
-    so::DisparityDrawer drawer(camera, so::tools::drawingConfig(algorithm, resolution));
+    so::DrawingConfig config = so::tools::drawingConfig(algorithm, resolution);
+    config.count_different_cells = true;
+    so::DisparityDrawer drawer(camera, config);
     so::LocalGrid grid;
     so::DrawStatistics stats;
     const bool plain = algorithm == so::DrawingAlgorithm::kLine || algorithm == so::DrawingAlgorithm::kRayTrace;

@@ -97,7 +97,9 @@ int run(int argc, char** argv) {
 
   for (double resolution : {1.0, 0.5, 0.25}) {
     for (so::DrawingAlgorithm algorithm : so::allDrawingAlgorithms()) {  // the paper's four, then the bounded
-      so::DisparityDrawer drawer(camera, so::tools::drawingConfig(algorithm, resolution));
+      so::DrawingConfig config = so::tools::drawingConfig(algorithm, resolution);
+      config.count_different_cells = true;
+      so::DisparityDrawer drawer(camera, config);
       so::LocalGrid grid;
       so::DrawStatistics stats;
       const std::vector<double> ms = so::tools::timeDrawing(&drawer, image, T_W_C, repeatsFor(algorithm, repeat),

@@ -22,6 +22,7 @@ DrawingConfig config(DrawingAlgorithm a, double resolution = 0.25) {
   DrawingConfig c;
   c.algorithm = a;
   c.resolution_m = resolution;
+  c.count_different_cells = true;  // Table I's counter, asserted below
   return c;
 }
 
@@ -370,6 +371,27 @@ TEST(Drawing, TinyPositiveDisparitiesAreInfinitelyFar) {
       if (tiny >= std::numeric_limits<float>::min())  // a denormal counts as no measurement
         EXPECT_GT(stats.different_grid_cells, 1000u) << toString(a) << " " << tiny;
     }
+  }
+}
+
+// Table I's "different grid cells" is one more pass over the grid: counted
+// on request only (the mapper never reads it), then equal to the known cells
+// before the blur.
+TEST(Drawing, DifferentCellsCountedOnRequest) {
+  StereoCameraConfig cam_cfg;
+  const StereoCameraModel cam(cam_cfg);
+  Eigen::Isometry3d T;
+  const cv::Mat image = table1Image(cam, &T);
+  for (bool count : {false, true}) {
+    DrawingConfig c = config(DrawingAlgorithm::kLinePyramid);
+    c.count_different_cells = count;
+    DisparityDrawer drawer(cam_cfg, c);
+    LocalGrid grid;
+    drawer.prepareGrid(T, &grid);
+    const DrawStatistics stats = drawer.drawInto(image, T, &grid);
+    EXPECT_GT(stats.grid_cells_drawn, 100000u);
+    EXPECT_EQ(stats.different_grid_cells, count ? grid.countKnown() : 0u) << count;
+    if (count) EXPECT_GT(stats.different_grid_cells, 40000u);
   }
 }
 
