@@ -3,6 +3,10 @@
 #include <algorithm>
 #include <cmath>
 
+#if defined(__SSE2__) && defined(__x86_64__)
+#include <emmintrin.h>
+#endif
+
 #include "stereo_occupancy/integer_math.h"
 
 namespace stereo_occupancy {
@@ -108,6 +112,34 @@ uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vecto
       idx_m += didx_m;
     };
     const float free_value = profile.free_log_odds;  // a local: stores to the grid cannot change it
+#if defined(__SSE2__) && defined(__x86_64__)
+    // The free run, most of the cells drawn, two cells at a time: the same
+    // 32.32 fixed-point sums and index products as below, in the two 64-bit
+    // lanes (inside the grid the positions are >= 0 and the cell coordinates
+    // and strides fit 32 bits). Halves the instructions per cell.
+    if (k + 1 < k_rise && sa <= 0xffffffffLL && sb <= 0xffffffffLL) {
+      const __m128i two_dta = _mm_set1_epi64x(2 * dta), two_dtb = _mm_set1_epi64x(2 * dtb);
+      const __m128i two_didx_m = _mm_set1_epi64x(2 * didx_m);
+      const __m128i vsa = _mm_set1_epi64x(sa), vsb = _mm_set1_epi64x(sb);
+      __m128i va = _mm_set_epi64x(pa + dta, pa);  // lane 0: cell k, lane 1: cell k + 1
+      __m128i vb = _mm_set_epi64x(pb + dtb, pb);
+      __m128i vm = _mm_set_epi64x(idx_m + didx_m, idx_m);
+      for (; k + 1 < k_rise; k += 2) {
+        // The high halves (the cell coordinates) moved to the low ones, which _mm_mul_epu32 multiplies.
+        const __m128i ca = _mm_shuffle_epi32(va, _MM_SHUFFLE(3, 3, 1, 1));
+        const __m128i cb = _mm_shuffle_epi32(vb, _MM_SHUFFLE(3, 3, 1, 1));
+        const __m128i idx = _mm_add_epi64(vm, _mm_add_epi64(_mm_mul_epu32(ca, vsa), _mm_mul_epu32(cb, vsb)));
+        put(_mm_cvtsi128_si64(idx), free_value);
+        put(_mm_cvtsi128_si64(_mm_unpackhi_epi64(idx, idx)), free_value);
+        va = _mm_add_epi64(va, two_dta);
+        vb = _mm_add_epi64(vb, two_dtb);
+        vm = _mm_add_epi64(vm, two_didx_m);
+      }
+      pa = _mm_cvtsi128_si64(va);
+      pb = _mm_cvtsi128_si64(vb);
+      idx_m = _mm_cvtsi128_si64(vm);
+    }
+#endif
     for (; k < k_rise; ++k, advance()) put(idx_m + cellA() * sa + cellB() * sb, free_value);
     float x = sampleAt(k, hc);
     for (; k < k_peak; ++k, x += dx, advance())
