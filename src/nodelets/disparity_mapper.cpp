@@ -91,6 +91,10 @@ class DisparityMapper : public nodelet::Nodelet {
   mutable std::mutex mutex_;
   DisparityMapperParameters params_;
   std::unique_ptr<DisparityDrawer> drawer_;  ///< rebuilt when the camera or drawing config changes
+  /// Why no drawer could be built for refused_camera_ with params_.drawing
+  /// (empty: none refused); its images are dropped without trying again.
+  std::string refused_setup_;
+  StereoCameraConfig refused_camera_;
   LocalGrid grid_;
   GridUpdate update_;
   sensor_msgs::CameraInfoConstPtr camera_info_;
@@ -232,6 +236,7 @@ void DisparityMapper::reconfigure(DisparityMapperConfig& config, uint32_t /*leve
   }
   params_ = next;
   drawer_.reset();  // rebuilt with the new tables on the next image
+  refused_setup_.clear();
 }
 
 void DisparityMapper::cameraInfoCallback(const sensor_msgs::CameraInfoConstPtr& msg) {
@@ -358,10 +363,32 @@ void DisparityMapper::process(const cv::Mat& disparity, const std_msgs::Header& 
     NODELET_WARN_THROTTLE(5.0, "refused an image: %s", last_problem_.c_str());
     return;
   }
+  if (!drawer_ || drawer_->camera().config() != camera) {
+    // A set-up the drawer refuses (e.g. a grid too fine for this camera's
+    // focal length) is reported once; its images are dropped until the
+    // camera or the parameters change.
+    if (!refused_setup_.empty() && refused_camera_ == camera) {
+      ++dropped_invalid_;
+      last_problem_ = refused_setup_;
+      return;
+    }
+    try {
+      drawer_ = std::make_unique<DisparityDrawer>(camera, params_.drawing);  // builds the lookup tables
+      refused_setup_.clear();
+    } catch (const std::invalid_argument& e) {
+      drawer_.reset();
+      refused_setup_ = e.what();
+      refused_camera_ = camera;
+      ++dropped_invalid_;
+      last_problem_ = refused_setup_;
+      NODELET_ERROR("cannot map with this camera and these parameters: %s; its images are dropped until the "
+                    "camera or the parameters (dynamic_reconfigure) change",
+                    e.what());
+      return;
+    }
+  }
   const auto start = std::chrono::steady_clock::now();
   try {
-    if (!drawer_ || drawer_->camera().config() != camera)
-      drawer_ = std::make_unique<DisparityDrawer>(camera, params_.drawing);  // builds the lookup tables
     drawer_->draw(disparity, T_W_C, &grid_);
   } catch (const std::exception& e) {
     ++dropped_invalid_;
@@ -389,8 +416,11 @@ void DisparityMapper::process(const cv::Mat& disparity, const std_msgs::Header& 
 void DisparityMapper::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   std::lock_guard<std::mutex> lock(mutex_);
   const bool dropping = dropped_no_transform_ + dropped_invalid_ > 0;
-  status.summary(dropping ? diagnostic_msgs::DiagnosticStatus::WARN : diagnostic_msgs::DiagnosticStatus::OK,
-                 dropping ? last_problem_ : "mapping");
+  if (!refused_setup_.empty())
+    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "cannot map with this camera: " + refused_setup_);
+  else
+    status.summary(dropping ? diagnostic_msgs::DiagnosticStatus::WARN : diagnostic_msgs::DiagnosticStatus::OK,
+                   dropping ? last_problem_ : "mapping");
   status.add("algorithm", toString(params_.drawing.algorithm));
   status.add("images received", images_received_);
   status.add("images processed", images_processed_);

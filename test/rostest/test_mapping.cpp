@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <diagnostic_msgs/DiagnosticArray.h>
+#include <rosgraph_msgs/Log.h>
 #include <dynamic_reconfigure/Reconfigure.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
@@ -362,7 +363,19 @@ TEST_F(MappingTest, BadInputIsRefusedAndTheNextImageWorks) {
       {"delta_d NaN", [=](stereo_msgs::DisparityImage& m) { m.delta_d = nan; }},
       {"oversized image", [](stereo_msgs::DisparityImage& m) {
          m.image.width = 5000; m.image.height = 5000; m.image.step = 20000; }},
+      // A well-formed camera for which 0.25 m cells are too fine (f = 1 px
+      // would need 2^-10 px lines): refused, and reported once for both.
+      {"f = 1 px", [](stereo_msgs::DisparityImage& m) { m.f = 1.0f; }},
+      {"f = 1 px again", [](stereo_msgs::DisparityImage& m) { m.f = 1.0f; }},
   };
+  int too_fine_errors = 0;
+  ros::Subscriber log_sub = nh_.subscribe<rosgraph_msgs::Log>(
+      "/rosout_agg", 50, [&](const rosgraph_msgs::LogConstPtr& log) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (log->level == rosgraph_msgs::Log::ERROR && log->msg.find("cannot map with this camera") != std::string::npos)
+          ++too_fine_errors;
+      });
+  ros::WallDuration(0.5).sleep();  // connected before the first case
   for (const auto& c : cases) {
     const ros::Time stamp = next();
     tf_.sendTransform(toTransformMsg(T_W_C_, stamp, "map", "camera_optical"));
@@ -435,7 +448,8 @@ TEST_F(MappingTest, BadInputIsRefusedAndTheNextImageWorks) {
   ASSERT_TRUE(waitFor([&] { return diag.count("time jumps back") && diag["time jumps back"] == "1"; }, 10.0));
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    EXPECT_EQ(diag["dropped: invalid input"], "13");  // the 13 malformed messages
+    EXPECT_EQ(diag["dropped: invalid input"], "15");  // the 13 malformed messages and the 2 too-fine cameras
+    EXPECT_EQ(too_fine_errors, 1);
     // tf2 itself refuses a NaN pose and a non-unit quaternion, so those two
     // images wait for a pose that never comes (dropped when the queue pushes
     // them out); no update carries their stamps (checked above).
