@@ -4,60 +4,7 @@
 #include <cmath>
 #include <limits>
 
-#if defined(__SSE2__)
-#include <emmintrin.h>
-#endif
-
 namespace stereo_occupancy {
-
-namespace {
-
-// The reductions of eqs. 14 and 16, with the operand order of the scalar
-// form in SSE2 too (minps / maxps return their second operand on a tie), so
-// that both give the same bits.
-struct MinOp {
-  static float apply(float a, float b) { return b < a ? b : a; }
-#if defined(__SSE2__)
-  static __m128 apply(__m128 a, __m128 b) { return _mm_min_ps(b, a); }
-#endif
-};
-struct MaxOp {
-  static float apply(float a, float b) { return a < b ? b : a; }
-#if defined(__SSE2__)
-  static __m128 apply(__m128 a, __m128 b) { return _mm_max_ps(b, a); }
-#endif
-};
-
-/// One level up: 2x2 blocks, op(op(top pair), op(bottom pair)); an odd last
-/// row or column pairs with itself.
-template <class Op>
-void reduceLevel(const cv::Mat& src, cv::Mat* dst) {
-  const int w = (src.cols + 1) / 2;
-  const int h = (src.rows + 1) / 2;
-  const int full = src.cols / 2;  // blocks with two columns
-  dst->create(h, w, CV_32FC1);
-  for (int y = 0; y < h; ++y) {
-    const float* r0 = src.ptr<float>(2 * y);
-    const float* r1 = 2 * y + 1 < src.rows ? src.ptr<float>(2 * y + 1) : r0;
-    float* out = dst->ptr<float>(y);
-    int x = 0;
-#if defined(__SSE2__)
-    // Four blocks at a time: the even and odd columns of eight pixels.
-    for (; x + 4 <= full; x += 4) {
-      auto pairs = [](const float* row) {
-        const __m128 lo = _mm_loadu_ps(row), hi = _mm_loadu_ps(row + 4);
-        return Op::apply(_mm_shuffle_ps(lo, hi, _MM_SHUFFLE(2, 0, 2, 0)), _mm_shuffle_ps(lo, hi, _MM_SHUFFLE(3, 1, 3, 1)));
-      };
-      _mm_storeu_ps(out + x, Op::apply(pairs(r0 + 2 * x), pairs(r1 + 2 * x)));
-    }
-#endif
-    for (; x < full; ++x)
-      out[x] = Op::apply(Op::apply(r0[2 * x], r0[2 * x + 1]), Op::apply(r1[2 * x], r1[2 * x + 1]));
-    if (full < w) out[full] = Op::apply(r0[2 * full], r1[2 * full]);
-  }
-}
-
-}  // namespace
 
 void DisparityPyramid::build(const cv::Mat& disparity, const StereoCameraModel& camera, PyramidType type,
                              int top_level) {
@@ -78,11 +25,27 @@ void DisparityPyramid::build(const cv::Mat& disparity, const StereoCameraModel& 
     for (int x = 0; x < disparity.cols; ++x) out[x] = valid(in[x]) ? in[x] : invalid;
   }
 
-  for (int i = 1; i <= top_level; ++i) {
-    if (type == PyramidType::kMinDisparity)
-      reduceLevel<MinOp>(levels_[i - 1], &levels_[i]);  // eq. 14
-    else
-      reduceLevel<MaxOp>(levels_[i - 1], &levels_[i]);  // eq. 16
+  auto reduce = [&](auto op) {  // 2x2 blocks; an odd last row or column pairs with itself
+    for (int i = 1; i <= top_level; ++i) {
+      const cv::Mat& src = levels_[i - 1];
+      cv::Mat& dst = levels_[i];
+      const int w = (src.cols + 1) / 2;
+      const int h = (src.rows + 1) / 2;
+      const int full = src.cols / 2;  // blocks with two columns
+      dst.create(h, w, CV_32FC1);
+      for (int y = 0; y < h; ++y) {
+        const float* r0 = src.ptr<float>(2 * y);
+        const float* r1 = 2 * y + 1 < src.rows ? src.ptr<float>(2 * y + 1) : r0;
+        float* out = dst.ptr<float>(y);
+        for (int x = 0; x < full; ++x) out[x] = op(op(r0[2 * x], r0[2 * x + 1]), op(r1[2 * x], r1[2 * x + 1]));
+        if (full < w) out[full] = op(r0[2 * full], r1[2 * full]);
+      }
+    }
+  };
+  if (type == PyramidType::kMinDisparity) {
+    reduce([](float a, float b) { return b < a ? b : a; });  // eq. 14
+  } else {
+    reduce([](float a, float b) { return a < b ? b : a; });  // eq. 16
   }
 }
 
