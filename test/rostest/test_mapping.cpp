@@ -369,13 +369,18 @@ TEST_F(MappingTest, BadInputIsRefusedAndTheNextImageWorks) {
       {"f = 1 px again", [](stereo_msgs::DisparityImage& m) { m.f = 1.0f; }},
   };
   int too_fine_errors = 0;
+  // Straight from the nodes' /rosout publishers (the rosout node, which
+  // would aggregate them to /rosout_agg, is not part of every installation).
   ros::Subscriber log_sub = nh_.subscribe<rosgraph_msgs::Log>(
-      "/rosout_agg", 50, [&](const rosgraph_msgs::LogConstPtr& log) {
+      "/rosout", 100, [&](const rosgraph_msgs::LogConstPtr& log) {
         std::lock_guard<std::mutex> lock(mutex_);
         if (log->level == rosgraph_msgs::Log::ERROR && log->msg.find("cannot map with this camera") != std::string::npos)
           ++too_fine_errors;
       });
-  ros::WallDuration(0.5).sleep();  // connected before the first case
+  const ros::WallTime log_until = ros::WallTime::now() + ros::WallDuration(10.0);
+  while (log_sub.getNumPublishers() < 2 && ros::WallTime::now() < log_until) ros::WallDuration(0.05).sleep();
+  ASSERT_GE(log_sub.getNumPublishers(), 2u) << "the nodelet manager's /rosout is not connected";
+  ros::WallDuration(0.5).sleep();  // the connections' handshakes done before the first case
   for (const auto& c : cases) {
     const ros::Time stamp = next();
     tf_.sendTransform(toTransformMsg(T_W_C_, stamp, "map", "camera_optical"));
