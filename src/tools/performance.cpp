@@ -16,6 +16,7 @@
 #include <iostream>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "stereo_occupancy/disparity_drawer.h"
@@ -58,14 +59,18 @@ Timing timeIt(int repeats, const std::function<void()>& setup, const std::functi
 
 /// The core of the mapper's path (shape and clear the grid, pyramids,
 /// drawing, blur as configured: off by default, encoding) on every frame of
-/// a simulated flight, per algorithm: the nodelet's work without ROS.
-int flightPath(const std::string& scenario_name) {
+/// a simulated flight, per algorithm: the nodelet's work without ROS. With
+/// @p pace_ms > 0 the thread sleeps that long before each frame, as a mapper
+/// between its camera's images (a 10 Hz camera: 100 ms): what the caches and
+/// the CPU's idle states cost a frame that arrives after a pause.
+int flightPath(const std::string& scenario_name, long pace_ms) {
   const so::FlightScenario scenario = so::tools::scenarioNamed(scenario_name);
   std::vector<cv::Mat> images;
   for (size_t i = 0; i < scenario.T_W_B.size(); ++i) images.push_back(so::renderStereoFrame(scenario, i, 1));
   std::cout << "Flight '" << scenario_name << "': " << images.size()
-            << " frames, 640x480, 0.25 m cells, 25 m range, the mapper's defaults (no blur); one thread.\n"
-               "Per frame: grid preparation + pyramids + drawing + encoding [ms].\n\n"
+            << " frames, 640x480, 0.25 m cells, 25 m range, the mapper's defaults (no blur); one thread"
+            << (pace_ms > 0 ? "; a pause of " + std::to_string(pace_ms) + " ms before each frame" : std::string())
+            << ".\nPer frame: grid preparation + pyramids + drawing + encoding [ms].\n\n"
                "| algorithm | mean | median | p99 | max |\n|---|---:|---:|---:|---:|\n";
   for (so::DrawingAlgorithm algorithm : {so::DrawingAlgorithm::kLinePyramid, so::DrawingAlgorithm::kRayTracePyramid,
                                          so::DrawingAlgorithm::kLinePyramidBounded}) {
@@ -77,6 +82,7 @@ int flightPath(const std::string& scenario_name) {
     std::vector<double> ms;
     for (size_t i = 0; i < images.size(); ++i) {
       const Eigen::Isometry3d T_W_C = scenario.cameraPose(i);
+      if (pace_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(pace_ms));
       const auto t0 = Clock::now();
       drawer.draw(images[i], T_W_C, &grid);
       so::encodeGridUpdate(grid, T_W_C.translation(), &update);
@@ -99,7 +105,7 @@ const char* kStages =
 int run(int argc, char** argv) {
   int repeat = 21;
   std::string only, scenario_name, flight;
-  long frame = 0;
+  long frame = 0, pace_ms = 0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--repeat") {
@@ -112,15 +118,19 @@ int run(int argc, char** argv) {
       scenario_name = so::tools::nextValue(argc, argv, &i);
     } else if (a == "--flight") {
       flight = so::tools::nextValue(argc, argv, &i);
+    } else if (a == "--pace-ms") {
+      pace_ms = so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 0, 10000);
     } else if (a == "--frame") {
       frame = so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 0, 1000000);
     } else if (a == "--help") {
-      std::cout << "usage: performance [--repeat N] [--only STAGE] [--scenario NAME [--frame K]] | --flight NAME\n"
+      std::cout << "usage: performance [--repeat N] [--only STAGE] [--scenario NAME [--frame K]] | --flight NAME "
+                   "[--pace-ms MS]\n"
                    "Times the mapper's stages on the Table I frame (or frame K of a simulated flight, with its "
                    "stereo effects, seed 1) at 0.25 m (median and min-max of N runs, default 21) and OctoMap's "
                    "insertPointCloud on the same frame.\n"
                    "--flight NAME: the core of the mapper's path on every frame of a simulated flight, with its "
-                   "mean, median, p99 and maximum.\n"
+                   "mean, median, p99 and maximum; --pace-ms MS sleeps MS before each frame, as between a "
+                   "camera's images.\n"
                    "STAGE: "
                 << kStages << "\n";
       return 0;
@@ -128,7 +138,8 @@ int run(int argc, char** argv) {
       throw so::tools::UsageError("unknown option '" + a + "'");
     }
   }
-  if (!flight.empty()) return flightPath(flight);
+  if (pace_ms > 0 && flight.empty()) throw so::tools::UsageError("--pace-ms needs --flight");
+  if (!flight.empty()) return flightPath(flight, pace_ms);
   const bool quiet = !only.empty();
   auto wanted = [&](const std::string& stage) { return only.empty() || only == stage; };
 

@@ -95,6 +95,7 @@ TEST(ToolErrors, BenchmarksAndFigures) {
   expectError("performance",
               {performance + " --repeat 0", performance + " --only warp_drive", performance + " --scenario mars",
                performance + " --scenario posts --frame 100000", performance + " --flight mars",
+               performance + " --pace-ms 100", performance + " --flight posts --pace-ms -1",
                performance + " --frobnicate"},
               2);
   expectError("make_figures", {figures + " a b", figures + " --frobnicate"}, 2);
