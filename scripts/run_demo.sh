@@ -44,6 +44,7 @@ map="$map_dir/stereo_occupancy_map.bt"
 [ -f "$map" ] || { echo "no map was saved; see $out/replay_$scenario.log"; exit 1; }
 
 summary="$(grep -m1 'DisparityMapper summary:' "$out/replay_$scenario.log" || true)"
+accumulator="$(grep -m1 'OctomapAccumulator summary:' "$out/replay_$scenario.log" || true)"
 field() { echo "$summary" | sed -n "s/.* $1=\([0-9.]*\).*/\1/p"; }  # " key=": cpu_ms_... also ends in ms_...
 quality="$("$bin/evaluate_map" --map "$map" --scenario "$scenario" --views "$out/${scenario}_map" 2>/dev/null)"
 q() { echo "$quality" | sed -n "s/.*\"$1\": \([0-9.e+-]*\).*/\1/p"; }
@@ -55,6 +56,7 @@ echo "stereo_occupancy demo: scenario '$scenario' (seed $seed), $algorithm at $(
 echo "  frames:       $(field images_received) received, $(field images_processed) mapped, $(field dropped_no_transform) dropped (no pose), $(field dropped_invalid) refused"
 echo "  ms per frame: $(field ms_per_image_mean) mean, $(field ms_per_image_median) median, $(field ms_per_image_p99) p99, $(field ms_per_image_max) max (draw + blur + encode + publish)"
 echo "  cpu ms:       $(field cpu_ms_per_image_median) median, $(field cpu_ms_per_image_p99) p99 (the same span in the mapper thread's CPU time, without waits for a core)"
+echo "  fusion ms:    $(summary="$accumulator" field fusion_ms_median) median, $(summary="$accumulator" field fusion_ms_p99) p99, $(summary="$accumulator" field fusion_ms_max) max (one update into the OctoMap, accumulator)"
 echo "  map quality against the ground truth (within one cell):"
 echo "    occupied precision       $(pct "$(q occupied_precision)")  ($(q occupied_at_surface) of $(q occupied_cells) occupied cells at a true surface)"
 echo "    occupied recall          $(pct "$(q occupied_recall)")  ($(q surface_found) of $(q truth_surface_cells) observed surface cells)"

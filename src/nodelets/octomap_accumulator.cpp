@@ -10,10 +10,12 @@
 #include <std_srvs/Empty.h>
 #include <std_srvs/Trigger.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <memory>
 #include <mutex>
+#include <vector>
 
 #include "stereo_occupancy/map_accumulator.h"
 #include "stereo_occupancy/ros/conversions.h"
@@ -44,6 +46,7 @@ class OctomapAccumulator : public nodelet::Nodelet {
   ros::WallTime last_prune_;
   uint64_t updates_received_ = 0, updates_refused_ = 0, leaves_pruned_ = 0;
   double last_fusion_ms_ = 0.0, max_fusion_ms_ = 0.0;
+  std::vector<double> fusion_ms_;  ///< per update, for the summary at shutdown (bounded)
   std::string last_problem_;
   bool changed_since_publish_ = true;
 
@@ -98,8 +101,18 @@ void OctomapAccumulator::onInit() {
 }
 
 OctomapAccumulator::~OctomapAccumulator() {
-  if (!map_ || params_.save_dir.empty()) return;
   std::lock_guard<std::mutex> lock(mutex_);
+  if (!fusion_ms_.empty()) {
+    // One line for scripts, on stderr (rosconsole may be gone at shutdown).
+    std::vector<double> ms = fusion_ms_;
+    std::sort(ms.begin(), ms.end());
+    std::fprintf(stderr,
+                 "OctomapAccumulator summary: updates_received=%lu updates_refused=%lu fusion_ms_median=%.3f "
+                 "fusion_ms_p99=%.3f fusion_ms_max=%.3f\n",
+                 static_cast<unsigned long>(updates_received_), static_cast<unsigned long>(updates_refused_),
+                 ms[ms.size() / 2], ms[std::min(ms.size() - 1, ms.size() * 99 / 100)], ms.back());
+  }
+  if (!map_ || params_.save_dir.empty()) return;
   if (map_->updates() == 0) return;
   try {
     // On stderr: rosconsole may be gone at shutdown.
@@ -126,6 +139,7 @@ void OctomapAccumulator::updateCallback(const OccupancyUpdateConstPtr& msg) {
   }
   last_fusion_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   max_fusion_ms_ = std::max(max_fusion_ms_, last_fusion_ms_);
+  if (fusion_ms_.size() < 1000000) fusion_ms_.push_back(last_fusion_ms_);
   frame_id_ = msg->header.frame_id;
   last_stamp_ = msg->header.stamp;
   changed_since_publish_ = true;
