@@ -5,7 +5,9 @@
 
 #include <Eigen/Core>
 
+#include <algorithm>
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -54,7 +56,87 @@ struct GridUpdate {
       }
     }
   }
+
+  /// Calls f(global_index, log_odds) for every cell, as forEachCell() does,
+  /// but brick by brick: the cells of each 2x2x2 block at even global
+  /// indices (the eight leaves of one octree node) one after another, in
+  /// octree child order (x, then y, then z); the blocks in x, y, z order.
+  /// A map updated in this order creates and visits sibling leaves together.
+  /// Requires isConsistent().
+  template <typename F>
+  void forEachCellBySiblings(F&& f) const;
 };
+
+template <typename F>
+void GridUpdate::forEachCellBySiblings(F&& f) const {
+  const int nx = size.x(), ny = size.y(), nz = size.z();
+  if (log_odds.empty()) return;
+  // Each row's stretch of known cells, [x0, x1) with values from log_odds[v]
+  // on; a run may go on into the next row.
+  struct Segment {
+    int x0, x1;
+    size_t v;
+  };
+  std::vector<Segment> segments;
+  std::vector<uint32_t> row_first(static_cast<size_t>(ny) * nz + 1, 0);  // segments of row r: [row_first[r], row_first[r+1])
+  size_t v = 0;
+  for (size_t k = 0; k < run_start.size(); ++k) {
+    uint64_t i = run_start[k], left = run_length[k];
+    while (left > 0) {
+      const uint64_t r = i / nx;
+      const int x0 = static_cast<int>(i % nx);
+      const int len = static_cast<int>(std::min<uint64_t>(left, static_cast<uint64_t>(nx - x0)));
+      segments.push_back({x0, x0 + len, v});
+      ++row_first[r + 1];
+      v += len;
+      i += len;
+      left -= len;
+    }
+  }
+  for (size_t r = 1; r < row_first.size(); ++r) row_first[r] += row_first[r - 1];
+  // Local index of the first brick along an axis: global index even.
+  auto evenStart = [](int origin) { return (origin & 1) != 0 ? -1 : 0; };
+  std::vector<float> rows[4];
+  for (int z0 = evenStart(origin_index.z()); z0 < nz; z0 += 2) {
+    for (int y0 = evenStart(origin_index.y()); y0 < ny; y0 += 2) {
+      // The four rows of this strip of bricks, q = dy + 2 dz.
+      uint32_t first[4], last[4];
+      int x_min = nx, x_max = 0;
+      for (int q = 0; q < 4; ++q) {
+        const int y = y0 + (q & 1), z = z0 + (q >> 1);
+        first[q] = last[q] = 0;
+        if (y < 0 || y >= ny || z < 0 || z >= nz) continue;
+        const size_t r = static_cast<size_t>(y) + static_cast<size_t>(ny) * z;
+        first[q] = row_first[r];
+        last[q] = row_first[r + 1];
+        if (first[q] == last[q]) continue;
+        x_min = std::min(x_min, segments[first[q]].x0);
+        x_max = std::max(x_max, segments[last[q] - 1].x1);
+      }
+      if (x_min >= x_max) continue;
+      const int xs = x_min - ((origin_index.x() + x_min) & 1);  // even global index
+      const int width = x_max - xs;
+      for (int q = 0; q < 4; ++q) {
+        if (first[q] == last[q]) continue;
+        rows[q].assign(width, std::numeric_limits<float>::quiet_NaN());  // NaN: no cell (values are finite)
+        for (uint32_t k = first[q]; k < last[q]; ++k)
+          std::copy(log_odds.begin() + segments[k].v, log_odds.begin() + segments[k].v + (segments[k].x1 - segments[k].x0),
+                    rows[q].begin() + (segments[k].x0 - xs));
+      }
+      for (int x0 = xs; x0 < x_max; x0 += 2)
+        for (int q = 0; q < 4; ++q) {
+          if (first[q] == last[q]) continue;
+          for (int dx = 0; dx < 2; ++dx) {
+            const int x = x0 + dx;
+            if (x >= x_max) break;
+            const float value = rows[q][x - xs];
+            if (value == value)
+              f(origin_index + Eigen::Vector3i(x, y0 + (q & 1), z0 + (q >> 1)), value);
+          }
+        }
+    }
+  }
+}
 
 /// Encodes the known (not LocalGrid::kUnknown) cells of @p grid with their
 /// values; cells whose value is exactly 0 carry nothing and are left out.

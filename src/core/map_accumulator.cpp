@@ -63,14 +63,18 @@ bool MapAccumulator::integrate(const GridUpdate& update, std::string* why) {
     return false;
   }
   const int offset = static_cast<int>(tree_->coordToKey(0.0));  // key of global index 0
-  // The cells come in storage order, so consecutive keys are mostly
-  // neighbours: the updater descends from their common ancestor.
+  // Sibling leaves one after another (an octree node's eight cells): the
+  // updater descends from the previous key's common ancestor, mostly the
+  // same parent, and a new node's children are created together, so they
+  // lie together in memory for the next update too. Over a flight this walk
+  // is about a third faster than the storage order (docs/performance.md).
   AccumulatingOcTree::LeafUpdater updater(tree_.get());
-  update.forEachCell([&](const Eigen::Vector3i& g, float log_odds) {
+  auto add = [&](const Eigen::Vector3i& g, float log_odds) {
     const Eigen::Vector3i k = g.array() + offset;
     if ((k.array() < 0).any() || (k.array() > 65535).any()) return;  // outside OcTree's extent
     updater.add(octomap::OcTreeKey(k.x(), k.y(), k.z()), log_odds);  // = updateNode(key, log_odds, lazy)
-  });
+  };
+  update.forEachCellBySiblings(add);
   inner_stale_ = true;
   W_last_origin_ = update.W_sensor_origin;
   ++updates_;

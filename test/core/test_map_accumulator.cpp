@@ -6,16 +6,20 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <map>
 #include <random>
+#include <set>
 #include <sstream>
 #include <thread>
 
 #include "stereo_occupancy/accumulating_octree.h"
 #include "stereo_occupancy/disparity_drawer.h"
+#include "stereo_occupancy/flight_simulation.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
 #include "stereo_occupancy/synthetic_scene.h"
@@ -275,4 +279,78 @@ TEST(AccumulatingOcTree, LeafUpdaterEqualsUpdateNode) {
   }
   EXPECT_EQ(fast.size(), plain.size());
   EXPECT_EQ(fullTree(fast), fullTree(plain));
+}
+
+// The order the accumulator walks an update in: every cell once, with its
+// value, and the eight cells of each even-aligned 2x2x2 block one after
+// another, whatever the parity of the grid's origin and sizes, also for
+// runs that go on into the next row.
+TEST(GridUpdate, SiblingOrderVisitsEveryCellOnceBlockByBlock) {
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 40; ++trial) {
+    LocalGrid grid;
+    const Eigen::Vector3i origin(static_cast<int>(rng() % 21) - 10, static_cast<int>(rng() % 21) - 10,
+                                 static_cast<int>(rng() % 21) - 10);
+    const Eigen::Vector3i size(1 + rng() % 9, 1 + rng() % 7, 1 + rng() % 6);
+    grid.reset(origin, size, 0.25);
+    const double density = (rng() % 100) / 100.0;
+    for (int z = 0; z < size.z(); ++z)
+      for (int y = 0; y < size.y(); ++y)
+        for (int x = 0; x < size.x(); ++x)
+          if ((rng() % 1000) / 1000.0 < density) grid.at(x, y, z) = 0.01f * static_cast<float>(1 + rng() % 300);
+    GridUpdate u;
+    encodeGridUpdate(grid, Eigen::Vector3d::Zero(), &u);
+    std::map<std::array<int, 3>, float> expected, seen;
+    u.forEachCell([&](const Eigen::Vector3i& g, float v) { expected[{g.x(), g.y(), g.z()}] = v; });
+    std::set<std::array<int, 3>> finished_blocks;
+    std::array<int, 3> block{};
+    bool first = true;
+    u.forEachCellBySiblings([&](const Eigen::Vector3i& g, float v) {
+      const std::array<int, 3> cell{g.x(), g.y(), g.z()};
+      EXPECT_EQ(seen.count(cell), 0u) << "a cell twice";
+      seen[cell] = v;
+      const std::array<int, 3> b{g.x() >> 1, g.y() >> 1, g.z() >> 1};  // floor(g / 2): even-aligned blocks
+      if (!first && b != block) {
+        EXPECT_EQ(finished_blocks.count(b), 0u) << "a block visited again, trial " << trial;
+        finished_blocks.insert(block);
+      }
+      block = b;
+      first = false;
+    });
+    ASSERT_EQ(seen, expected) << "trial " << trial;
+  }
+}
+
+// The accumulator over several frames of a flight (overlapping views, grids
+// of every origin parity) against octomap's updateNode cell by cell in
+// storage order: the same tree, node for node.
+TEST(MapAccumulator, IntegrateEqualsUpdateNodeOverAFlight) {
+  const FlightScenario scenario = makeScenario("posts");
+  DrawingConfig drawing;
+  drawing.algorithm = DrawingAlgorithm::kLinePyramid;
+  drawing.resolution_m = 0.5;
+  DisparityDrawer drawer(scenario.camera, drawing);
+  MapAccumulatorConfig cfg;
+  cfg.resolution_m = 0.5;
+  MapAccumulator map(cfg);
+  octomap::OcTree plain(0.5);
+  plain.setClampingThresMin(cfg.clamping_min_prob);
+  plain.setClampingThresMax(cfg.clamping_max_prob);
+  plain.setOccupancyThres(cfg.occupancy_threshold_prob);
+  const int offset = static_cast<int>(plain.coordToKey(0.0));
+  for (size_t frame : {0u, 30u, 31u, 90u, 150u}) {
+    const Eigen::Isometry3d T = scenario.cameraPose(frame);
+    LocalGrid grid;
+    drawer.draw(renderStereoFrame(scenario, frame, 1), T, &grid);
+    GridUpdate update;
+    encodeGridUpdate(grid, T.translation(), &update);
+    ASSERT_GT(update.numCells(), 1000u);
+    ASSERT_TRUE(map.integrate(update));
+    update.forEachCell([&](const Eigen::Vector3i& g, float v) {
+      plain.updateNode(octomap::OcTreeKey(g.x() + offset, g.y() + offset, g.z() + offset), v, true);
+    });
+  }
+  plain.updateInnerOccupancy();
+  EXPECT_EQ(map.tree().size(), plain.size());
+  EXPECT_EQ(fullTree(map.tree()), fullTree(plain));
 }
