@@ -139,9 +139,9 @@ int run(int argc, char** argv) {
                    "Times the mapper's stages on the Table I frame (or frame K of a simulated flight, with its "
                    "stereo effects, seed 1) at 0.25 m (median and min-max of N runs, default 21) and OctoMap's "
                    "insertPointCloud on the same frame.\n"
-                   "--flight NAME: the core of the mapper's path on every frame of a simulated flight, with its "
-                   "mean, median, p99 and maximum; --pace-ms MS sleeps MS before each frame, as between a "
-                   "camera's images.\n"
+                   "--flight NAME: the core of the mapper's path, and the fusion of its update into the flight's "
+                   "map, on every frame of a simulated flight, with their mean, median, p99 and maximum; "
+                   "--pace-ms MS sleeps MS before each frame, as between a camera's images.\n"
                    "STAGE: "
                 << kStages << "\n";
       return 0;
