@@ -390,7 +390,7 @@ void DisparityMapper::process(const cv::Mat& disparity, const std_msgs::Header& 
     try {
       drawer_ = std::make_unique<DisparityDrawer>(camera, params_.drawing);  // builds the lookup tables
       refused_setup_.clear();
-    } catch (const std::invalid_argument& e) {
+    } catch (const std::exception& e) {  // invalid_argument for a refused set-up; nothing may escape a callback
       drawer_.reset();
       refused_setup_ = e.what();
       refused_camera_ = camera;
