@@ -8,6 +8,7 @@
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 
+#include <cstdint>
 #include <limits>
 
 #include "stereo_occupancy/disparity_pyramid.h"
@@ -56,22 +57,42 @@ class LineDrawer {
                    double l_stop = std::numeric_limits<double>::infinity()) const;
 
  private:
-  /// What stays fixed during one bounded descent.
-  struct BoundedDescent {
-    const DisparityPyramid& min_pyramid;
-    const DisparityPyramid& max_pyramid;
-    const DisparityBlockBound& bound;
-    const Eigen::Isometry3d& T_W_C;
-    LocalGrid* grid;
-    double cell_f_m_px;  ///< c·f: level i's rays are one cell apart at depth c·f / 2^i
+  /// The grid as the lines see it while one image is drawn into it: the
+  /// camera centre in the grid's cell units, its cells and the range limit.
+  /// Built once per image, not once per line.
+  struct RayGrid {
+    Eigen::Vector3d g0;  ///< line origin relative to the grid's lower corner [cells]
+    double c = 0.0;      ///< cell size [m]
+    double inv_c = 0.0;  ///< 1 / c [1/m]
+    double max_range_m = 0.0;
+    Eigen::Vector3i size;
+    int64_t stride[3] = {0, 0, 0};  ///< index steps along x, y, z
+    float* data = nullptr;
   };
+  RayGrid rayGrid(const Eigen::Vector3d& W_origin, LocalGrid* grid) const;
+  /// drawRay() in a RayGrid.
+  uint64_t drawRay(const RayGrid& g, const Eigen::Vector3d& W_dir, const RangeProfile& profile, double l_begin,
+                   double l_stop) const;
+
+  /// What stays fixed during one (bounded or plain) descent.
+  struct Descent {
+    const DisparityPyramid& min_pyramid;
+    const DisparityPyramid* max_pyramid;  ///< bounded descent only
+    const DisparityBlockBound* bound;     ///< bounded descent only
+    const Eigen::Isometry3d& T_W_C;
+    RayGrid grid;
+    RangeProfile free_profile;  ///< of the pixels that measure no range
+    double cell_f_m_px;         ///< c·f: level i's rays are one cell apart at depth c·f / 2^i
+    DrawStatistics* stats;
+  };
+  Descent descent(const DisparityPyramid& min_pyramid, const DisparityPyramid* max_pyramid,
+                  const DisparityBlockBound* bound, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
+                  DrawStatistics* stats) const;
 
   /// Draws the line of pixel (x, y) at pyramid level i with disparity d, from depth z_begin on.
-  uint64_t drawPixel(int level, int x, int y, float d_px, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
-                     double z_begin = 0.0) const;
-  void descend(const DisparityPyramid& pyramid, int level, int x, int y, const Eigen::Isometry3d& T_W_C,
-               LocalGrid* grid, DrawStatistics* stats) const;
-  void descendBounded(const BoundedDescent& b, int level, int x, int y, double z_begin, DrawStatistics* stats) const;
+  uint64_t drawPixel(const Descent& s, int level, int x, int y, float d_px, double z_begin = 0.0) const;
+  void descend(const Descent& s, int level, int x, int y) const;
+  void descendBounded(const Descent& s, int level, int x, int y, double z_begin) const;
 
   const StereoCameraModel& camera_;
   const LogOddsTable& table_;

@@ -76,7 +76,7 @@ class StereoCameraModel {
   double rangeUncertainty(double z_m, double l_m) const { return z_m * l_m * delta_d_over_bf_; }
 
   /// Smallest disparity whose depth is still inside max_range_m [px].
-  double farDisparity() const { return bf_ / config_.max_range_m; }
+  double farDisparity() const { return far_disparity_px_; }
 
   /// Largest valid disparity: the matcher's maximum and the minimum range [px].
   double nearDisparity() const;
@@ -100,6 +100,7 @@ class StereoCameraModel {
   double bf_;
   double inv_f_;
   double delta_d_over_bf_;  ///< Δd / (b f) [1/m]
+  double far_disparity_px_;  ///< b f / max_range_m, asked once per line drawn
   float min_valid_;
   float max_valid_;
 };

@@ -14,41 +14,69 @@ namespace stereo_occupancy {
 LineDrawer::LineDrawer(const StereoCameraModel& camera, const LogOddsTable& table, const PyramidLevelTable& levels)
     : camera_(camera), table_(table), levels_(levels) {}
 
+LineDrawer::RayGrid LineDrawer::rayGrid(const Eigen::Vector3d& W_origin, LocalGrid* grid) const {
+  RayGrid g;
+  g.c = grid->resolution();
+  g.inv_c = 1.0 / g.c;
+  g.g0 = (W_origin - grid->originPosition()) * g.inv_c;
+  g.max_range_m = camera_.config().max_range_m;
+  g.size = grid->size();
+  g.stride[0] = 1;
+  g.stride[1] = g.size.x();
+  g.stride[2] = static_cast<int64_t>(g.size.x()) * g.size.y();
+  g.data = grid->data();
+  return g;
+}
+
 uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vector3d& W_dir,
                              const RangeProfile& profile, LocalGrid* grid, double l_begin, double l_stop) const {
-  const double c = grid->resolution();
-  const double inv_c = 1.0 / c;
-  const double l_end = std::min({static_cast<double>(profile.endRange()), camera_.config().max_range_m, l_stop});
+  return drawRay(rayGrid(W_origin, grid), W_dir, profile, l_begin, l_stop);
+}
+
+uint64_t LineDrawer::drawRay(const RayGrid& g, const Eigen::Vector3d& W_dir, const RangeProfile& profile,
+                             double l_begin, double l_stop) const {
+  const double c = g.c;
+  const double inv_c = g.inv_c;
+  const double l_end = std::min({static_cast<double>(profile.endRange()), g.max_range_m, l_stop});
   if (!(l_end > l_begin)) return 0;
 
   // Cell units relative to the grid's lower corner. One cell per slab of the
   // major axis (a 3D Bresenham line); in each slab the cell is the one where
   // the ray crosses the slab's centre plane, and l is the ray's range there.
-  const Eigen::Vector3d g0 = (W_origin - grid->originPosition()) * inv_c;
+  const Eigen::Vector3d& g0 = g.g0;
   const double t_begin = l_begin * inv_c;
   const double t_end = l_end * inv_c;
-  int m = 0;
-  W_dir.cwiseAbs().maxCoeff(&m);
-  const int a = (m + 1) % 3;
-  const int b = (m + 2) % 3;
-  const Eigen::Vector3d g_begin = g0 + W_dir * t_begin;
+  const double abs_dir[3] = {std::abs(W_dir[0]), std::abs(W_dir[1]), std::abs(W_dir[2])};
+  int m = abs_dir[1] > abs_dir[0] ? 1 : 0;  // the first of the largest, as Eigen's maxCoeff
+  if (abs_dir[2] > abs_dir[m]) m = 2;
+  static constexpr int kNext[3] = {1, 2, 0};
+  const int a = kNext[m];
+  const int b = kNext[a];
+  const double g_begin[3] = {g0[0] + W_dir[0] * t_begin, g0[1] + W_dir[1] * t_begin, g0[2] + W_dir[2] * t_begin};
+  const double g_end[3] = {g0[0] + W_dir[0] * t_end, g0[1] + W_dir[1] * t_end, g0[2] + W_dir[2] * t_end};
   const int k0 = floorToInt(g_begin[m]);
-  const int k1 = floorToInt(g0[m] + W_dir[m] * t_end);
+  const int k1 = floorToInt(g_end[m]);
   const int step = W_dir[m] > 0.0 ? 1 : -1;
   const int n = std::abs(k1 - k0) + 1;
-  const double dt = 1.0 / std::abs(W_dir[m]);
+  const double dt = 1.0 / abs_dir[m];
   const double t0 = (k0 + 0.5 - g0[m]) / W_dir[m];  // |t0 - t_begin| <= dt / 2
 
-  const Eigen::Vector3i& size = grid->size();
-  const int64_t stride[3] = {1, size.x(), static_cast<int64_t>(size.x()) * size.y()};
+  const Eigen::Vector3i& size = g.size;
+  const int64_t* stride = g.stride;
   const int na = size[a] - 1, nb = size[b] - 1, nm = size[m] - 1;
-  float* data = grid->data();
+  float* data = g.data;
   auto put = [&](int64_t idx, float value) {
     float& cell = data[idx];
     cell = std::max(cell, value);  // obstacle priority (section V-A, step 2b)
   };
-  // The first and the last slab are only partly on the segment: sample the
-  // segment point nearest to the centre plane.
+  // When both ends lie inside the grid (the usual case: the grid covers the
+  // frustum), so does the segment and no index needs a check.
+  const double margin = 1e-3;
+  bool inside = true;
+  for (int i = 0; i < 3; ++i) {
+    const double hi = static_cast<double>(size[i]) - margin;
+    inside &= (g_begin[i] >= margin) & (g_end[i] >= margin) & (g_begin[i] < hi) & (g_end[i] < hi);
+  }
   // The first and the last slab are only partly on the segment: sample the
   // segment point nearest to the centre plane. Cells outside the grid are
   // skipped (only possible when the grid does not cover the segment).
@@ -57,7 +85,7 @@ uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vecto
     t = std::clamp(t, t_begin, t_end);
     const int ka = floorToInt(g0[a] + W_dir[a] * t);
     const int kb = floorToInt(g0[b] + W_dir[b] * t);
-    if (km < 0 || km > nm || ka < 0 || ka > na || kb < 0 || kb > nb) return;
+    if (!inside && (km < 0 || km > nm || ka < 0 || ka > na || kb < 0 || kb > nb)) return;
     put(km * stride[m] + ka * stride[a] + kb * stride[b], profile.at(static_cast<float>(t * c)));
     ++written;
   };
@@ -84,13 +112,6 @@ uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vecto
   };
   // Free space up to the measurement's front: one value for all those cells.
   const int k_free = firstWith(profile.front_m);
-  // When both ends lie inside the grid (the usual case: the grid covers the
-  // frustum), so does the segment and no index needs a check.
-  const Eigen::Vector3d g_end = g0 + W_dir * t_end;
-  const double margin = 1e-3;
-  const bool inside = (g_begin.array() >= margin).all() && (g_end.array() >= margin).all() &&
-                      (g_begin.array() < size.cast<double>().array() - margin).all() &&
-                      (g_end.array() < size.cast<double>().array() - margin).all();
   auto cellA = [&]() { return static_cast<int64_t>(pa >> 32); };
   auto cellB = [&]() { return static_cast<int64_t>(pb >> 32); };
   int k = 1;
@@ -168,7 +189,7 @@ void LineDrawer::drawImage(const cv::Mat& disparity, const Eigen::Isometry3d& T_
                            DrawStatistics* stats) const {
   CV_Assert(disparity.type() == CV_32FC1);
   const Eigen::Matrix3d R_W_C = T_W_C.linear();
-  const Eigen::Vector3d W_centre = T_W_C.translation();
+  const RayGrid g = rayGrid(T_W_C.translation(), grid);
   stats->coordinate_transfers += 1;  // the camera centre
   for (int y = 0; y < disparity.rows; ++y) {
     const float* row = disparity.ptr<float>(y);
@@ -178,60 +199,75 @@ void LineDrawer::drawImage(const cv::Mat& disparity, const Eigen::Isometry3d& T_
       ++stats->used_image_pixels;
       ++stats->coordinate_transfers;
       const Eigen::Vector3d W_dir = R_W_C * camera_.rayThroughPixel(x, y).normalized();
-      stats->grid_cells_drawn += drawRay(W_centre, W_dir, pixelProfile(camera_, table_, x, y, d), grid);
+      stats->grid_cells_drawn += drawRay(g, W_dir, pixelProfile(camera_, table_, x, y, d), 0.0,
+                                         std::numeric_limits<double>::infinity());
     }
   }
 }
 
-uint64_t LineDrawer::drawPixel(int level, int x, int y, float d_px, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
-                               double z_begin) const {
+LineDrawer::Descent LineDrawer::descent(const DisparityPyramid& min_pyramid, const DisparityPyramid* max_pyramid,
+                                        const DisparityBlockBound* bound, const Eigen::Isometry3d& T_W_C,
+                                        LocalGrid* grid, DrawStatistics* stats) const {
+  return Descent{min_pyramid,
+                 max_pyramid,
+                 bound,
+                 T_W_C,
+                 rayGrid(T_W_C.translation(), grid),
+                 table_.freeProfile(),
+                 grid->resolution() * camera_.config().focal_length_px,
+                 stats};
+}
+
+uint64_t LineDrawer::drawPixel(const Descent& s, int level, int x, int y, float d_px, double z_begin) const {
   const double X = DisparityPyramid::centreOf(level, x, camera_.config().width_px);
   const double Y = DisparityPyramid::centreOf(level, y, camera_.config().height_px);
   const Eigen::Vector3d C_ray = camera_.rayThroughPixel(X, Y);  // z = 1
-  const double norm = C_ray.norm();
-  return drawRay(T_W_C.translation(), T_W_C.linear() * (C_ray / norm), pixelProfile(camera_, table_, X, Y, d_px),
-                 grid, z_begin * norm);
+  const double norm = C_ray.norm();                             // |p_c| / z_c (eq. 2)
+  // pixelProfile(), with the ray's norm at hand.
+  const RangeProfile profile =
+      measuresRange(camera_, d_px) ? measuredProfile(camera_, table_, norm, d_px) : s.free_profile;
+  return drawRay(s.grid, s.T_W_C.linear() * (C_ray / norm), profile, z_begin * norm,
+                 std::numeric_limits<double>::infinity());
 }
 
-void LineDrawer::descend(const DisparityPyramid& pyramid, int level, int x, int y, const Eigen::Isometry3d& T_W_C,
-                         LocalGrid* grid, DrawStatistics* stats) const {
-  const float d = pyramid.at(level, x, y);
-  ++stats->used_image_pixels;
+void LineDrawer::descend(const Descent& s, int level, int x, int y) const {
+  const float d = s.min_pyramid.at(level, x, y);
+  ++s.stats->used_image_pixels;
   if (d == DisparityPyramid::kInvalidMin) return;  // the whole block is invalid
   if (level <= levels_.minLevel() || levels_.levelForDisparity(d) >= level) {
-    ++stats->coordinate_transfers;
-    stats->grid_cells_drawn += drawPixel(level, x, y, d, T_W_C, grid);
+    ++s.stats->coordinate_transfers;
+    s.stats->grid_cells_drawn += drawPixel(s, level, x, y, d);
     return;
   }
-  const int w = pyramid.width(level - 1);
-  const int h = pyramid.height(level - 1);
+  const int w = s.min_pyramid.width(level - 1);
+  const int h = s.min_pyramid.height(level - 1);
   for (int cy = 2 * y; cy <= 2 * y + 1 && cy < h; ++cy)
-    for (int cx = 2 * x; cx <= 2 * x + 1 && cx < w; ++cx) descend(pyramid, level - 1, cx, cy, T_W_C, grid, stats);
+    for (int cx = 2 * x; cx <= 2 * x + 1 && cx < w; ++cx) descend(s, level - 1, cx, cy);
 }
 
 void LineDrawer::drawPyramid(const DisparityPyramid& min_pyramid, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
                              DrawStatistics* stats) const {
   stats->coordinate_transfers += 1;  // the camera centre
+  const Descent s = descent(min_pyramid, nullptr, nullptr, T_W_C, grid, stats);
   const int top = min_pyramid.topLevel();
   for (int y = 0; y < min_pyramid.height(top); ++y)
-    for (int x = 0; x < min_pyramid.width(top); ++x) descend(min_pyramid, top, x, y, T_W_C, grid, stats);
+    for (int x = 0; x < min_pyramid.width(top); ++x) descend(s, top, x, y);
 }
 
-void LineDrawer::descendBounded(const BoundedDescent& b, int level, int x, int y, double z_begin,
-                                DrawStatistics* stats) const {
-  const float d = b.min_pyramid.at(level, x, y);
-  ++stats->used_image_pixels;
+void LineDrawer::descendBounded(const Descent& s, int level, int x, int y, double z_begin) const {
+  const float d = s.min_pyramid.at(level, x, y);
+  ++s.stats->used_image_pixels;
   if (d == DisparityPyramid::kInvalidMin) return;  // the whole block is invalid
   const bool at_bottom = level <= levels_.minLevel();
   const bool fine_enough = levels_.levelForDisparity(d) >= level;
   float d_max = d;
   if (level > 0) {
-    ++stats->used_image_pixels;
-    d_max = b.max_pyramid.at(level, x, y);
+    ++s.stats->used_image_pixels;
+    d_max = s.max_pyramid->at(level, x, y);
   }
-  if (at_bottom || (fine_enough && (level <= 0 || b.bound.isFaithful(d, d_max)))) {
-    ++stats->coordinate_transfers;
-    stats->grid_cells_drawn += drawPixel(level, x, y, d, b.T_W_C, b.grid, z_begin);
+  if (at_bottom || (fine_enough && (level <= 0 || s.bound->isFaithful(d, d_max)))) {
+    ++s.stats->coordinate_transfers;
+    s.stats->grid_cells_drawn += drawPixel(s, level, x, y, d, z_begin);
     return;
   }
   // The block's rays lie within one cell of each other up to the depth
@@ -243,19 +279,20 @@ void LineDrawer::descendBounded(const BoundedDescent& b, int level, int x, int y
   const double Y = DisparityPyramid::centreOf(level, y, cfg.height_px);
   const Eigen::Vector3d C_ray = camera_.rayThroughPixel(X, Y);  // z = 1
   const double norm = C_ray.norm();
-  const RangeProfile nearest = pixelProfile(camera_, table_, X, Y, d_max);
-  const double z_shared = std::min(b.cell_f_m_px * powerOfTwo(-level),
+  const RangeProfile nearest =
+      measuresRange(camera_, d_max) ? measuredProfile(camera_, table_, norm, d_max) : s.free_profile;
+  const double z_shared = std::min(s.cell_f_m_px * powerOfTwo(-level),
                                    static_cast<double>(nearest.l_p_m + nearest.front_m) / norm);
   if (z_shared > z_begin) {
-    ++stats->coordinate_transfers;
-    stats->grid_cells_drawn += drawRay(b.T_W_C.translation(), b.T_W_C.linear() * (C_ray / norm),
-                                       table_.freeProfile(), b.grid, z_begin * norm, z_shared * norm);
+    ++s.stats->coordinate_transfers;
+    s.stats->grid_cells_drawn +=
+        drawRay(s.grid, s.T_W_C.linear() * (C_ray / norm), s.free_profile, z_begin * norm, z_shared * norm);
     z_begin = z_shared;
   }
-  const int w = b.min_pyramid.width(level - 1);
-  const int h = b.min_pyramid.height(level - 1);
+  const int w = s.min_pyramid.width(level - 1);
+  const int h = s.min_pyramid.height(level - 1);
   for (int cy = 2 * y; cy <= 2 * y + 1 && cy < h; ++cy)
-    for (int cx = 2 * x; cx <= 2 * x + 1 && cx < w; ++cx) descendBounded(b, level - 1, cx, cy, z_begin, stats);
+    for (int cx = 2 * x; cx <= 2 * x + 1 && cx < w; ++cx) descendBounded(s, level - 1, cx, cy, z_begin);
 }
 
 void LineDrawer::drawPyramidBounded(const DisparityPyramid& min_pyramid, const DisparityPyramid& max_pyramid,
@@ -264,11 +301,10 @@ void LineDrawer::drawPyramidBounded(const DisparityPyramid& min_pyramid, const D
   CV_Assert(min_pyramid.type() == PyramidType::kMinDisparity && max_pyramid.type() == PyramidType::kMaxDisparity &&
             min_pyramid.topLevel() == max_pyramid.topLevel());
   stats->coordinate_transfers += 1;  // the camera centre
-  const BoundedDescent b{min_pyramid, max_pyramid, bound, T_W_C, grid,
-                         grid->resolution() * camera_.config().focal_length_px};
+  const Descent s = descent(min_pyramid, &max_pyramid, &bound, T_W_C, grid, stats);
   const int top = min_pyramid.topLevel();
   for (int y = 0; y < min_pyramid.height(top); ++y)
-    for (int x = 0; x < min_pyramid.width(top); ++x) descendBounded(b, top, x, y, 0.0, stats);
+    for (int x = 0; x < min_pyramid.width(top); ++x) descendBounded(s, top, x, y, 0.0);
 }
 
 }  // namespace stereo_occupancy

@@ -40,7 +40,8 @@ StereoCameraModel::StereoCameraModel(const StereoCameraConfig& config)
     : config_(config),
       bf_(config.baseline_m * config.focal_length_px),
       inv_f_(1.0 / config.focal_length_px),
-      delta_d_over_bf_(config.delta_d_px / bf_) {
+      delta_d_over_bf_(config.delta_d_px / bf_),
+      far_disparity_px_(bf_ / config.max_range_m) {
   min_valid_ = std::max(static_cast<float>(config.min_disparity_px), std::numeric_limits<float>::min());
   max_valid_ = static_cast<float>(nearDisparity());
 }
