@@ -3,8 +3,68 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 namespace stereo_occupancy {
+
+namespace {
+
+/// Level 0 (the sanitised input) and level 1 in one pass over the input:
+/// each pair of input rows is sanitised into level 0 and reduced into a row
+/// of level 1 while it is in registers. @p op is the reduction of two values
+/// (eq. 14 or 16) and @p op4 the same on four lanes, with the same result for
+/// equal values. NaN, negative and out-of-range values carry no information.
+template <typename Op, typename Op4>
+void sanitiseAndReduce(const cv::Mat& disparity, StereoCameraModel::DisparityValidity valid, float invalid, Op op,
+                       Op4 op4, cv::Mat* d0, cv::Mat* d1) {
+  const int cols = disparity.cols, rows = disparity.rows;
+  const int w = (cols + 1) / 2, h = (rows + 1) / 2;
+  const int full = cols / 2;  // blocks with two columns
+  auto sanitise = [&](float d) { return valid(d) ? d : invalid; };
+#if defined(__SSE2__)
+  const __m128 zero = _mm_setzero_ps(), lo = _mm_set1_ps(valid.min_px), hi = _mm_set1_ps(valid.max_px);
+  const __m128 inv = _mm_set1_ps(invalid);
+  auto sanitise4 = [&](const float* in, float* out) {  // the same as sanitise(), four at a time
+    const __m128 d = _mm_loadu_ps(in);
+    const __m128 ok = _mm_or_ps(_mm_cmpeq_ps(d, zero), _mm_and_ps(_mm_cmpge_ps(d, lo), _mm_cmple_ps(d, hi)));
+    const __m128 v = _mm_or_ps(_mm_and_ps(ok, d), _mm_andnot_ps(ok, inv));
+    _mm_storeu_ps(out, v);
+    return v;
+  };
+#endif
+  for (int y = 0; y < h; ++y) {
+    const bool two_rows = 2 * y + 1 < rows;  // an odd last row pairs with itself
+    const float* in0 = disparity.ptr<float>(2 * y);
+    const float* in1 = two_rows ? disparity.ptr<float>(2 * y + 1) : in0;
+    float* s0 = d0->ptr<float>(2 * y);
+    float* s1 = two_rows ? d0->ptr<float>(2 * y + 1) : s0;
+    float* out = d1->ptr<float>(y);
+    int x = 0;
+#if defined(__SSE2__)
+    for (; 2 * x + 8 <= cols; x += 4) {  // four blocks: eight columns of both rows
+      const __m128 a0 = sanitise4(in0 + 2 * x, s0 + 2 * x), a1 = sanitise4(in0 + 2 * x + 4, s0 + 2 * x + 4);
+      const __m128 b0 = sanitise4(in1 + 2 * x, s1 + 2 * x), b1 = sanitise4(in1 + 2 * x + 4, s1 + 2 * x + 4);
+      const __m128 top = op4(_mm_shuffle_ps(a0, a1, _MM_SHUFFLE(2, 0, 2, 0)), _mm_shuffle_ps(a0, a1, _MM_SHUFFLE(3, 1, 3, 1)));
+      const __m128 bottom =
+          op4(_mm_shuffle_ps(b0, b1, _MM_SHUFFLE(2, 0, 2, 0)), _mm_shuffle_ps(b0, b1, _MM_SHUFFLE(3, 1, 3, 1)));
+      _mm_storeu_ps(out + x, op4(top, bottom));
+    }
+#endif
+    for (; x < full; ++x) {
+      const float a = s0[2 * x] = sanitise(in0[2 * x]), b = s0[2 * x + 1] = sanitise(in0[2 * x + 1]);
+      const float c = s1[2 * x] = sanitise(in1[2 * x]), d = s1[2 * x + 1] = sanitise(in1[2 * x + 1]);
+      out[x] = op(op(a, b), op(c, d));
+    }
+    if (full < w) {
+      const float a = s0[2 * full] = sanitise(in0[2 * full]), c = s1[2 * full] = sanitise(in1[2 * full]);
+      out[full] = op(a, c);
+    }
+  }
+}
+
+}  // namespace
 
 void DisparityPyramid::build(const cv::Mat& disparity, const StereoCameraModel& camera, PyramidType type,
                              int top_level) {
@@ -13,20 +73,22 @@ void DisparityPyramid::build(const cv::Mat& disparity, const StereoCameraModel& 
   const float invalid = invalidValue();
   top_level = std::max(top_level, 0);
   levels_.resize(top_level + 1);
+  const StereoCameraModel::DisparityValidity valid = camera.validity();
 
-  // Level 0: sanitise. NaN, negative and out-of-range values carry no
-  // information. Branch-free, so that it vectorises.
   cv::Mat& d0 = levels_[0];
   d0.create(disparity.rows, disparity.cols, CV_32FC1);
-  const StereoCameraModel::DisparityValidity valid = camera.validity();
-  for (int y = 0; y < disparity.rows; ++y) {
-    const float* in = disparity.ptr<float>(y);
-    float* out = d0.ptr<float>(y);
-    for (int x = 0; x < disparity.cols; ++x) out[x] = valid(in[x]) ? in[x] : invalid;
+  if (top_level == 0) {  // level 0 alone: sanitise. Branch-free, so that it vectorises.
+    for (int y = 0; y < disparity.rows; ++y) {
+      const float* in = disparity.ptr<float>(y);
+      float* out = d0.ptr<float>(y);
+      for (int x = 0; x < disparity.cols; ++x) out[x] = valid(in[x]) ? in[x] : invalid;
+    }
+    return;
   }
+  levels_[1].create((disparity.rows + 1) / 2, (disparity.cols + 1) / 2, CV_32FC1);
 
-  auto reduce = [&](auto op) {  // 2x2 blocks; an odd last row or column pairs with itself
-    for (int i = 1; i <= top_level; ++i) {
+  auto reduce = [&](auto op) {  // levels 2.. from 1: 2x2 blocks; an odd last row or column pairs with itself
+    for (int i = 2; i <= top_level; ++i) {
       const cv::Mat& src = levels_[i - 1];
       cv::Mat& dst = levels_[i];
       const int w = (src.cols + 1) / 2;
@@ -42,10 +104,26 @@ void DisparityPyramid::build(const cv::Mat& disparity, const StereoCameraModel& 
       }
     }
   };
+  // op(a, b) keeps a for equal values (also +0 against -0); so do the lanes'
+  // _mm_min_ps(b, a) and _mm_max_ps(b, a), which return their second operand then.
   if (type == PyramidType::kMinDisparity) {
-    reduce([](float a, float b) { return b < a ? b : a; });  // eq. 14
+    const auto op = [](float a, float b) { return b < a ? b : a; };  // eq. 14
+#if defined(__SSE2__)
+    const auto op4 = [](__m128 a, __m128 b) { return _mm_min_ps(b, a); };
+#else
+    const int op4 = 0;
+#endif
+    sanitiseAndReduce(disparity, valid, invalid, op, op4, &d0, &levels_[1]);
+    reduce(op);
   } else {
-    reduce([](float a, float b) { return a < b ? b : a; });  // eq. 16
+    const auto op = [](float a, float b) { return a < b ? b : a; };  // eq. 16
+#if defined(__SSE2__)
+    const auto op4 = [](__m128 a, __m128 b) { return _mm_max_ps(b, a); };
+#else
+    const int op4 = 0;
+#endif
+    sanitiseAndReduce(disparity, valid, invalid, op, op4, &d0, &levels_[1]);
+    reduce(op);
   }
 }
 
