@@ -19,6 +19,21 @@
 
 namespace stereo_occupancy {
 
+/// Instruction sets the line drawing's free run uses, in rising order.
+enum class SimdLevel {
+  kScalar,  ///< plain C++ (every target; the only one off x86-64)
+  kSse2,    ///< two cells at a time (every x86-64 CPU)
+};
+const char* toString(SimdLevel level);
+
+/// The level in use: the best the target offers, unless limited.
+SimdLevel lineDrawingSimdLevel();
+
+/// Uses at most @p level from now on (for tests and benchmarks: every level
+/// draws the same cells and values); returns the level in use. Not
+/// thread-safe: call it while nothing draws.
+SimdLevel limitLineDrawingSimdLevel(SimdLevel level);
+
 /// Draws disparity images into a LocalGrid by line drawing. Holds references
 /// to the camera, the lookup tables and the grid; not thread-safe.
 class LineDrawer {

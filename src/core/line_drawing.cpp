@@ -4,12 +4,87 @@
 #include <cmath>
 
 #if defined(__SSE2__) && defined(__x86_64__)
+#define STEREO_OCCUPANCY_X86_64_SIMD 1
 #include <emmintrin.h>
 #endif
 
 #include "stereo_occupancy/integer_math.h"
 
 namespace stereo_occupancy {
+
+namespace {
+
+/// Where a line's free run stands: cell k's minor coordinates in 32.32 fixed
+/// point and its index along the major axis, and their steps per slab.
+struct FreeRun {
+  int64_t pa, pb, idx_m;
+  int64_t dta, dtb, didx_m;
+  int64_t sa, sb;  ///< index strides of the minor axes
+};
+
+#if STEREO_OCCUPANCY_X86_64_SIMD
+/// The free run's cells two at a time, in the 64-bit lanes of SSE2
+/// registers: the same 32.32 fixed-point sums and index products as the
+/// scalar loop (inside the grid the positions are >= 0 and the cell
+/// coordinates and strides fit 32 bits, as _mm_mul_epu32 needs), then a
+/// max-store per cell (there is no scatter). Returns the first k not drawn
+/// and leaves @p r at it.
+int freeRunSse2(float* data, int k, int k_end, float free_value, FreeRun* r) {
+  if (k + 1 >= k_end) return k;
+  const __m128i two_dta = _mm_set1_epi64x(2 * r->dta), two_dtb = _mm_set1_epi64x(2 * r->dtb);
+  const __m128i two_didx_m = _mm_set1_epi64x(2 * r->didx_m);
+  const __m128i vsa = _mm_set1_epi64x(r->sa), vsb = _mm_set1_epi64x(r->sb);
+  __m128i va = _mm_set_epi64x(r->pa + r->dta, r->pa);  // lane 0: cell k, lane 1: cell k + 1
+  __m128i vb = _mm_set_epi64x(r->pb + r->dtb, r->pb);
+  __m128i vm = _mm_set_epi64x(r->idx_m + r->didx_m, r->idx_m);
+  for (; k + 1 < k_end; k += 2) {
+    // The high halves (the cell coordinates) moved to the low ones, which _mm_mul_epu32 multiplies.
+    const __m128i ca = _mm_shuffle_epi32(va, _MM_SHUFFLE(3, 3, 1, 1));
+    const __m128i cb = _mm_shuffle_epi32(vb, _MM_SHUFFLE(3, 3, 1, 1));
+    const __m128i idx = _mm_add_epi64(vm, _mm_add_epi64(_mm_mul_epu32(ca, vsa), _mm_mul_epu32(cb, vsb)));
+    float* c0 = data + _mm_cvtsi128_si64(idx);
+    float* c1 = data + _mm_cvtsi128_si64(_mm_unpackhi_epi64(idx, idx));
+    *c0 = std::max(*c0, free_value);  // obstacle priority (section V-A, step 2b)
+    *c1 = std::max(*c1, free_value);
+    va = _mm_add_epi64(va, two_dta);
+    vb = _mm_add_epi64(vb, two_dtb);
+    vm = _mm_add_epi64(vm, two_didx_m);
+  }
+  r->pa = _mm_cvtsi128_si64(va);
+  r->pb = _mm_cvtsi128_si64(vb);
+  r->idx_m = _mm_cvtsi128_si64(vm);
+  return k;
+}
+#endif
+
+constexpr SimdLevel availableSimdLevel() {
+#if STEREO_OCCUPANCY_X86_64_SIMD
+  return SimdLevel::kSse2;
+#else
+  return SimdLevel::kScalar;
+#endif
+}
+
+SimdLevel g_simd_level = availableSimdLevel();
+
+}  // namespace
+
+SimdLevel lineDrawingSimdLevel() { return g_simd_level; }
+
+SimdLevel limitLineDrawingSimdLevel(SimdLevel level) {
+  g_simd_level = std::min(level, availableSimdLevel());
+  return g_simd_level;
+}
+
+const char* toString(SimdLevel level) {
+  switch (level) {
+    case SimdLevel::kScalar:
+      return "scalar";
+    case SimdLevel::kSse2:
+      return "sse2";
+  }
+  return "?";
+}
 
 LineDrawer::LineDrawer(const StereoCameraModel& camera, const LogOddsTable& table, const PyramidLevelTable& levels)
     : camera_(camera), table_(table), levels_(levels) {}
@@ -133,32 +208,14 @@ uint64_t LineDrawer::drawRay(const RayGrid& g, const Eigen::Vector3d& W_dir, con
       idx_m += didx_m;
     };
     const float free_value = profile.free_log_odds;  // a local: stores to the grid cannot change it
-#if defined(__SSE2__) && defined(__x86_64__)
-    // The free run, most of the cells drawn, two cells at a time: the same
-    // 32.32 fixed-point sums and index products as below, in the two 64-bit
-    // lanes (inside the grid the positions are >= 0 and the cell coordinates
-    // and strides fit 32 bits). Halves the instructions per cell.
-    if (k + 1 < k_rise && sa <= 0xffffffffLL && sb <= 0xffffffffLL) {
-      const __m128i two_dta = _mm_set1_epi64x(2 * dta), two_dtb = _mm_set1_epi64x(2 * dtb);
-      const __m128i two_didx_m = _mm_set1_epi64x(2 * didx_m);
-      const __m128i vsa = _mm_set1_epi64x(sa), vsb = _mm_set1_epi64x(sb);
-      __m128i va = _mm_set_epi64x(pa + dta, pa);  // lane 0: cell k, lane 1: cell k + 1
-      __m128i vb = _mm_set_epi64x(pb + dtb, pb);
-      __m128i vm = _mm_set_epi64x(idx_m + didx_m, idx_m);
-      for (; k + 1 < k_rise; k += 2) {
-        // The high halves (the cell coordinates) moved to the low ones, which _mm_mul_epu32 multiplies.
-        const __m128i ca = _mm_shuffle_epi32(va, _MM_SHUFFLE(3, 3, 1, 1));
-        const __m128i cb = _mm_shuffle_epi32(vb, _MM_SHUFFLE(3, 3, 1, 1));
-        const __m128i idx = _mm_add_epi64(vm, _mm_add_epi64(_mm_mul_epu32(ca, vsa), _mm_mul_epu32(cb, vsb)));
-        put(_mm_cvtsi128_si64(idx), free_value);
-        put(_mm_cvtsi128_si64(_mm_unpackhi_epi64(idx, idx)), free_value);
-        va = _mm_add_epi64(va, two_dta);
-        vb = _mm_add_epi64(vb, two_dtb);
-        vm = _mm_add_epi64(vm, two_didx_m);
-      }
-      pa = _mm_cvtsi128_si64(va);
-      pb = _mm_cvtsi128_si64(vb);
-      idx_m = _mm_cvtsi128_si64(vm);
+    // The free run, most of the cells drawn, two cells at a time.
+#if STEREO_OCCUPANCY_X86_64_SIMD
+    if (g_simd_level == SimdLevel::kSse2 && sa <= 0xffffffffLL && sb <= 0xffffffffLL) {
+      FreeRun run{pa, pb, idx_m, dta, dtb, didx_m, sa, sb};
+      k = freeRunSse2(data, k, k_rise, free_value, &run);
+      pa = run.pa;
+      pb = run.pb;
+      idx_m = run.idx_m;
     }
 #endif
     for (; k < k_rise; ++k, advance()) put(idx_m + cellA() * sa + cellB() * sb, free_value);

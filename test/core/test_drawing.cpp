@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
+#include <cstring>
 #include <limits>
 #include <map>
 #include <random>
@@ -392,6 +394,47 @@ TEST(Drawing, DifferentCellsCountedOnRequest) {
     EXPECT_GT(stats.grid_cells_drawn, 100000u);
     EXPECT_EQ(stats.different_grid_cells, count ? grid.countKnown() : 0u) << count;
     if (count) EXPECT_GT(stats.different_grid_cells, 40000u);
+  }
+}
+
+// The free run's SSE2 kernel (x86-64) draws the same grids as the plain loop
+// that other targets run, bit for bit, for every line drawing algorithm,
+// from poses whose lines run along every axis in both directions.
+TEST(Drawing, SimdLevelsDrawTheSameGrids) {
+  StereoCameraConfig cam_cfg;
+  const StereoCameraModel cam(cam_cfg);
+  Eigen::Isometry3d T_table1;
+  const SyntheticScene scene = table1Scene(&T_table1);
+  std::vector<Eigen::Isometry3d> poses = testPoses();
+  poses.push_back(T_table1);
+  const SimdLevel best = lineDrawingSimdLevel();
+  std::printf("[          ] free run: this target allows %s\n", toString(best));
+  struct Restore {
+    SimdLevel level;
+    ~Restore() { limitLineDrawingSimdLevel(level); }
+  } restore{best};
+  for (DrawingAlgorithm algorithm :
+       {DrawingAlgorithm::kLine, DrawingAlgorithm::kLinePyramid, DrawingAlgorithm::kLinePyramidBounded}) {
+    DisparityDrawer drawer(cam_cfg, config(algorithm));
+    for (size_t p = 0; p < poses.size(); ++p) {
+      const cv::Mat image = renderDisparity(scene, cam, poses[p]);
+      LocalGrid plain;
+      ASSERT_EQ(limitLineDrawingSimdLevel(SimdLevel::kScalar), SimdLevel::kScalar);
+      drawer.prepareGrid(poses[p], &plain);
+      const DrawStatistics plain_stats = drawer.drawInto(image, poses[p], &plain);
+      EXPECT_GT(plain_stats.different_grid_cells, 20000u) << toString(algorithm) << " pose " << p;
+      for (SimdLevel level : {SimdLevel::kSse2}) {
+        if (level > best) continue;
+        ASSERT_EQ(limitLineDrawingSimdLevel(level), level);
+        LocalGrid simd;
+        drawer.prepareGrid(poses[p], &simd);
+        const DrawStatistics stats = drawer.drawInto(image, poses[p], &simd);
+        EXPECT_EQ(stats.grid_cells_drawn, plain_stats.grid_cells_drawn);
+        ASSERT_EQ(simd.numCells(), plain.numCells());
+        EXPECT_EQ(std::memcmp(simd.data(), plain.data(), plain.numCells() * sizeof(float)), 0)
+            << toString(algorithm) << " pose " << p << " " << toString(level);
+      }
+    }
   }
 }
 
