@@ -24,7 +24,6 @@
 #include <chrono>
 #include <ctime>
 #include <cstdio>
-#include <numeric>
 #include <memory>
 #include <mutex>
 
@@ -34,6 +33,7 @@
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/ros/conversions.h"
 #include "stereo_occupancy/ros/parameters.h"
+#include "stereo_occupancy/time_statistics.h"
 
 namespace stereo_occupancy {
 
@@ -205,12 +205,8 @@ void DisparityMapper::onInit() {
 DisparityMapper::~DisparityMapper() {
   std::lock_guard<std::mutex> lock(mutex_);
   if (processing_ms_.empty()) return;
-  std::vector<double> ms = processing_ms_;
-  std::sort(ms.begin(), ms.end());
-  const double mean = std::accumulate(ms.begin(), ms.end(), 0.0) / ms.size();
-  std::vector<double> cpu = processing_cpu_ms_;
-  std::sort(cpu.begin(), cpu.end());
-  auto p99 = [](const std::vector<double>& v) { return v[std::min(v.size() - 1, v.size() * 99 / 100)]; };
+  const TimeStatistics wall = TimeStatistics::of(processing_ms_);
+  const TimeStatistics cpu = TimeStatistics::of(processing_cpu_ms_);
   // One line for scripts: counts and the processing time per image (draw,
   // blur, encode, publish). On stderr: rosconsole may be gone at shutdown.
   std::fprintf(stderr, "DisparityMapper summary: images_received=%lu images_processed=%lu dropped_no_transform=%lu "
@@ -218,8 +214,9 @@ DisparityMapper::~DisparityMapper() {
            "ms_per_image_max=%.3f cpu_ms_per_image_median=%.3f cpu_ms_per_image_p99=%.3f algorithm=%s "
            "resolution_m=%.2f\n",
            static_cast<unsigned long>(images_received_), static_cast<unsigned long>(images_processed_),
-           static_cast<unsigned long>(dropped_no_transform_), static_cast<unsigned long>(dropped_invalid_), mean,
-           ms[ms.size() / 2], p99(ms), ms.back(), cpu[cpu.size() / 2], p99(cpu), toString(params_.drawing.algorithm),
+           static_cast<unsigned long>(dropped_no_transform_), static_cast<unsigned long>(dropped_invalid_),
+           wall.mean_ms, wall.median_ms, wall.p99_ms, wall.max_ms, cpu.median_ms, cpu.p99_ms,
+           toString(params_.drawing.algorithm),
            params_.drawing.resolution_m);
 }
 

@@ -20,6 +20,7 @@
 #include "stereo_occupancy/map_accumulator.h"
 #include "stereo_occupancy/ros/conversions.h"
 #include "stereo_occupancy/ros/parameters.h"
+#include "stereo_occupancy/time_statistics.h"
 
 namespace stereo_occupancy {
 
@@ -104,13 +105,12 @@ OctomapAccumulator::~OctomapAccumulator() {
   std::lock_guard<std::mutex> lock(mutex_);
   if (!fusion_ms_.empty()) {
     // One line for scripts, on stderr (rosconsole may be gone at shutdown).
-    std::vector<double> ms = fusion_ms_;
-    std::sort(ms.begin(), ms.end());
+    const TimeStatistics fusion = TimeStatistics::of(fusion_ms_);
     std::fprintf(stderr,
                  "OctomapAccumulator summary: updates_received=%lu updates_refused=%lu fusion_ms_median=%.3f "
                  "fusion_ms_p99=%.3f fusion_ms_max=%.3f\n",
                  static_cast<unsigned long>(updates_received_), static_cast<unsigned long>(updates_refused_),
-                 ms[ms.size() / 2], ms[std::min(ms.size() - 1, ms.size() * 99 / 100)], ms.back());
+                 fusion.median_ms, fusion.p99_ms, fusion.max_ms);
   }
   if (!map_ || params_.save_dir.empty()) return;
   if (map_->updates() == 0) return;

@@ -24,6 +24,7 @@
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
 #include "stereo_occupancy/synthetic_scene.h"
+#include "stereo_occupancy/time_statistics.h"
 #include "drawing_benchmark.h"
 #include "tool_support.h"
 
@@ -94,13 +95,11 @@ int flightPath(const std::string& scenario_name, long pace_ms) {
       ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
       fusion_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t1).count());
     }
-    auto stats = [](std::vector<double> v) {
-      double sum = 0.0;
-      for (double x : v) sum += x;
-      std::sort(v.begin(), v.end());
+    auto stats = [](const std::vector<double>& v) {
+      const so::TimeStatistics t = so::TimeStatistics::of(v);
       std::ostringstream s;
-      s << std::fixed << std::setprecision(2) << sum / v.size() << " | " << v[v.size() / 2] << " | "
-        << v[std::min(v.size() - 1, v.size() * 99 / 100)] << " | " << v.back();
+      s << std::fixed << std::setprecision(2) << t.mean_ms << " | " << t.median_ms << " | " << t.p99_ms << " | "
+        << t.max_ms;
       return s.str();
     };
     std::cout << "| " << so::toString(algorithm) << " | " << stats(ms) << " | " << stats(fusion_ms) << " |"
