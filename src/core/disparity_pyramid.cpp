@@ -11,14 +11,30 @@ namespace stereo_occupancy {
 
 namespace {
 
+// The reductions of two values. op(a, b) keeps a for equal values (also +0
+// against -0); so do the lanes' _mm_min_ps(b, a) and _mm_max_ps(b, a), which
+// return their second operand then.
+struct MinDisparity {  // eq. 14
+  static float op(float a, float b) { return b < a ? b : a; }
+#if defined(__SSE2__)
+  static __m128 op4(__m128 a, __m128 b) { return _mm_min_ps(b, a); }
+#endif
+};
+struct MaxDisparity {  // eq. 16
+  static float op(float a, float b) { return a < b ? b : a; }
+#if defined(__SSE2__)
+  static __m128 op4(__m128 a, __m128 b) { return _mm_max_ps(b, a); }
+#endif
+};
+
 /// Level 0 (the sanitised input) and level 1 in one pass over the input:
 /// each pair of input rows is sanitised into level 0 and reduced into a row
-/// of level 1 while it is in registers. @p op is the reduction of two values
-/// (eq. 14 or 16) and @p op4 the same on four lanes, with the same result for
-/// equal values. NaN, negative and out-of-range values carry no information.
-template <typename Op, typename Op4>
-void sanitiseAndReduce(const cv::Mat& disparity, StereoCameraModel::DisparityValidity valid, float invalid, Op op,
-                       Op4 op4, cv::Mat* d0, cv::Mat* d1) {
+/// of level 1 while it is in registers, with Reduction::op, four lanes at a
+/// time with Reduction::op4. NaN, negative and out-of-range values carry no
+/// information.
+template <typename Reduction>
+void sanitiseAndReduce(const cv::Mat& disparity, StereoCameraModel::DisparityValidity valid, float invalid,
+                       cv::Mat* d0, cv::Mat* d1) {
   const int cols = disparity.cols, rows = disparity.rows;
   const int w = (cols + 1) / 2, h = (rows + 1) / 2;
   const int full = cols / 2;  // blocks with two columns
@@ -46,20 +62,21 @@ void sanitiseAndReduce(const cv::Mat& disparity, StereoCameraModel::DisparityVal
     for (; 2 * x + 8 <= cols; x += 4) {  // four blocks: eight columns of both rows
       const __m128 a0 = sanitise4(in0 + 2 * x, s0 + 2 * x), a1 = sanitise4(in0 + 2 * x + 4, s0 + 2 * x + 4);
       const __m128 b0 = sanitise4(in1 + 2 * x, s1 + 2 * x), b1 = sanitise4(in1 + 2 * x + 4, s1 + 2 * x + 4);
-      const __m128 top = op4(_mm_shuffle_ps(a0, a1, _MM_SHUFFLE(2, 0, 2, 0)), _mm_shuffle_ps(a0, a1, _MM_SHUFFLE(3, 1, 3, 1)));
-      const __m128 bottom =
-          op4(_mm_shuffle_ps(b0, b1, _MM_SHUFFLE(2, 0, 2, 0)), _mm_shuffle_ps(b0, b1, _MM_SHUFFLE(3, 1, 3, 1)));
-      _mm_storeu_ps(out + x, op4(top, bottom));
+      const __m128 top = Reduction::op4(_mm_shuffle_ps(a0, a1, _MM_SHUFFLE(2, 0, 2, 0)),
+                                        _mm_shuffle_ps(a0, a1, _MM_SHUFFLE(3, 1, 3, 1)));
+      const __m128 bottom = Reduction::op4(_mm_shuffle_ps(b0, b1, _MM_SHUFFLE(2, 0, 2, 0)),
+                                           _mm_shuffle_ps(b0, b1, _MM_SHUFFLE(3, 1, 3, 1)));
+      _mm_storeu_ps(out + x, Reduction::op4(top, bottom));
     }
 #endif
     for (; x < full; ++x) {
       const float a = s0[2 * x] = sanitise(in0[2 * x]), b = s0[2 * x + 1] = sanitise(in0[2 * x + 1]);
       const float c = s1[2 * x] = sanitise(in1[2 * x]), d = s1[2 * x + 1] = sanitise(in1[2 * x + 1]);
-      out[x] = op(op(a, b), op(c, d));
+      out[x] = Reduction::op(Reduction::op(a, b), Reduction::op(c, d));
     }
     if (full < w) {
       const float a = s0[2 * full] = sanitise(in0[2 * full]), c = s1[2 * full] = sanitise(in1[2 * full]);
-      out[full] = op(a, c);
+      out[full] = Reduction::op(a, c);
     }
   }
 }
@@ -87,7 +104,11 @@ void DisparityPyramid::build(const cv::Mat& disparity, const StereoCameraModel& 
   }
   levels_[1].create((disparity.rows + 1) / 2, (disparity.cols + 1) / 2, CV_32FC1);
 
-  auto reduce = [&](auto op) {  // levels 2.. from 1: 2x2 blocks; an odd last row or column pairs with itself
+  auto build = [&](auto reduction) {
+    using Reduction = decltype(reduction);
+    auto op = [](float a, float b) { return Reduction::op(a, b); };
+    sanitiseAndReduce<Reduction>(disparity, valid, invalid, &d0, &levels_[1]);
+    // Levels 2.. from 1: 2x2 blocks; an odd last row or column pairs with itself.
     for (int i = 2; i <= top_level; ++i) {
       const cv::Mat& src = levels_[i - 1];
       cv::Mat& dst = levels_[i];
@@ -104,26 +125,10 @@ void DisparityPyramid::build(const cv::Mat& disparity, const StereoCameraModel& 
       }
     }
   };
-  // op(a, b) keeps a for equal values (also +0 against -0); so do the lanes'
-  // _mm_min_ps(b, a) and _mm_max_ps(b, a), which return their second operand then.
   if (type == PyramidType::kMinDisparity) {
-    const auto op = [](float a, float b) { return b < a ? b : a; };  // eq. 14
-#if defined(__SSE2__)
-    const auto op4 = [](__m128 a, __m128 b) { return _mm_min_ps(b, a); };
-#else
-    const int op4 = 0;
-#endif
-    sanitiseAndReduce(disparity, valid, invalid, op, op4, &d0, &levels_[1]);
-    reduce(op);
+    build(MinDisparity());
   } else {
-    const auto op = [](float a, float b) { return a < b ? b : a; };  // eq. 16
-#if defined(__SSE2__)
-    const auto op4 = [](__m128 a, __m128 b) { return _mm_max_ps(b, a); };
-#else
-    const int op4 = 0;
-#endif
-    sanitiseAndReduce(disparity, valid, invalid, op, op4, &d0, &levels_[1]);
-    reduce(op);
+    build(MaxDisparity());
   }
 }
 
