@@ -24,6 +24,7 @@ enum class SimdLevel {
   kScalar,  ///< plain C++ (every target; the only one off x86-64)
   kSse2,    ///< two cells at a time (every x86-64 CPU)
 };
+/// The level's name: "scalar" or "sse2".
 const char* toString(SimdLevel level);
 
 /// The level in use: the best the target offers, unless limited.
