@@ -105,6 +105,8 @@ class LineDrawer {
                   const DisparityBlockBound* bound, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
                   DrawStatistics* stats) const;
 
+  /// pixelProfile() with the ray's norm at hand (|p_c| / z_c, eq. 2) and the free profile built once.
+  RangeProfile profileOf(const Descent& s, double ray_norm, float d_px) const;
   /// Draws the line of pixel (x, y) at pyramid level i with disparity d, from depth z_begin on.
   uint64_t drawPixel(const Descent& s, int level, int x, int y, float d_px, double z_begin = 0.0) const;
   void descend(const Descent& s, int level, int x, int y) const;

@@ -275,15 +275,16 @@ LineDrawer::Descent LineDrawer::descent(const DisparityPyramid& min_pyramid, con
                  stats};
 }
 
+RangeProfile LineDrawer::profileOf(const Descent& s, double ray_norm, float d_px) const {
+  return measuresRange(camera_, d_px) ? measuredProfile(camera_, table_, ray_norm, d_px) : s.free_profile;
+}
+
 uint64_t LineDrawer::drawPixel(const Descent& s, int level, int x, int y, float d_px, double z_begin) const {
   const double X = DisparityPyramid::centreOf(level, x, camera_.config().width_px);
   const double Y = DisparityPyramid::centreOf(level, y, camera_.config().height_px);
   const Eigen::Vector3d C_ray = camera_.rayThroughPixel(X, Y);  // z = 1
   const double norm = C_ray.norm();                             // |p_c| / z_c (eq. 2)
-  // pixelProfile(), with the ray's norm at hand.
-  const RangeProfile profile =
-      measuresRange(camera_, d_px) ? measuredProfile(camera_, table_, norm, d_px) : s.free_profile;
-  return drawRay(s.grid, s.T_W_C.linear() * (C_ray / norm), profile, z_begin * norm,
+  return drawRay(s.grid, s.T_W_C.linear() * (C_ray / norm), profileOf(s, norm, d_px), z_begin * norm,
                  std::numeric_limits<double>::infinity());
 }
 
@@ -336,8 +337,7 @@ void LineDrawer::descendBounded(const Descent& s, int level, int x, int y, doubl
   const double Y = DisparityPyramid::centreOf(level, y, cfg.height_px);
   const Eigen::Vector3d C_ray = camera_.rayThroughPixel(X, Y);  // z = 1
   const double norm = C_ray.norm();
-  const RangeProfile nearest =
-      measuresRange(camera_, d_max) ? measuredProfile(camera_, table_, norm, d_max) : s.free_profile;
+  const RangeProfile nearest = profileOf(s, norm, d_max);
   const double z_shared = std::min(s.cell_f_m_px * powerOfTwo(-level),
                                    static_cast<double>(nearest.l_p_m + nearest.front_m) / norm);
   if (z_shared > z_begin) {
