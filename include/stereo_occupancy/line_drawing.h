@@ -84,6 +84,9 @@ class LineDrawer {
     Eigen::Vector3i size;
     int64_t stride[3] = {0, 0, 0};  ///< index steps along x, y, z
     float* data = nullptr;
+    /// A line whose ends lie in [kMargin, upper) on every axis lies inside the grid [cells].
+    static constexpr double kMargin = 1e-3;
+    double upper[3] = {0.0, 0.0, 0.0};  ///< size - kMargin [cells]
   };
   RayGrid rayGrid(const Eigen::Vector3d& W_origin, LocalGrid* grid) const;
   /// drawRay() in a RayGrid.

@@ -99,6 +99,7 @@ LineDrawer::RayGrid LineDrawer::rayGrid(const Eigen::Vector3d& W_origin, LocalGr
   g.stride[0] = 1;
   g.stride[1] = g.size.x();
   g.stride[2] = static_cast<int64_t>(g.size.x()) * g.size.y();
+  for (int i = 0; i < 3; ++i) g.upper[i] = static_cast<double>(g.size[i]) - RayGrid::kMargin;
   g.data = grid->data();
   return g;
 }
@@ -138,7 +139,6 @@ uint64_t LineDrawer::drawRay(const RayGrid& g, const Eigen::Vector3d& W_dir, con
 
   const Eigen::Vector3i& size = g.size;
   const int64_t* stride = g.stride;
-  const int na = size[a] - 1, nb = size[b] - 1, nm = size[m] - 1;
   float* data = g.data;
   auto put = [&](int64_t idx, float value) {
     float& cell = data[idx];
@@ -146,12 +146,9 @@ uint64_t LineDrawer::drawRay(const RayGrid& g, const Eigen::Vector3d& W_dir, con
   };
   // When both ends lie inside the grid (the usual case: the grid covers the
   // frustum), so does the segment and no index needs a check.
-  const double margin = 1e-3;
   bool inside = true;
-  for (int i = 0; i < 3; ++i) {
-    const double hi = static_cast<double>(size[i]) - margin;
-    inside &= (g_begin[i] >= margin) & (g_end[i] >= margin) & (g_begin[i] < hi) & (g_end[i] < hi);
-  }
+  for (int i = 0; i < 3; ++i)
+    inside &= (std::min(g_begin[i], g_end[i]) >= RayGrid::kMargin) & (std::max(g_begin[i], g_end[i]) < g.upper[i]);
   // The first and the last slab are only partly on the segment: sample the
   // segment point nearest to the centre plane. Cells outside the grid are
   // skipped (only possible when the grid does not cover the segment).
@@ -160,7 +157,7 @@ uint64_t LineDrawer::drawRay(const RayGrid& g, const Eigen::Vector3d& W_dir, con
     t = std::clamp(t, t_begin, t_end);
     const int ka = floorToInt(g0[a] + W_dir[a] * t);
     const int kb = floorToInt(g0[b] + W_dir[b] * t);
-    if (!inside && (km < 0 || km > nm || ka < 0 || ka > na || kb < 0 || kb > nb)) return;
+    if (!inside && (km < 0 || km >= size[m] || ka < 0 || ka >= size[a] || kb < 0 || kb >= size[b])) return;
     put(km * stride[m] + ka * stride[a] + kb * stride[b], profile.at(static_cast<float>(t * c)));
     ++written;
   };
@@ -185,8 +182,10 @@ uint64_t LineDrawer::drawRay(const RayGrid& g, const Eigen::Vector3d& W_dir, con
     if (steps > static_cast<float>(n - 1)) return n - 1;
     return std::min(n - 1, 1 + ceilToInt(steps));
   };
-  // Free space up to the measurement's front: one value for all those cells.
-  const int k_free = firstWith(profile.front_m);
+  // Free space up to the measurement's front: one value for all those cells
+  // (all of them on a line of free space, l_p = inf).
+  const bool measures = profile.l_p_m < std::numeric_limits<float>::infinity();
+  const int k_free = measures ? firstWith(profile.front_m) : n - 1;
   auto cellA = [&]() { return static_cast<int64_t>(pa >> 32); };
   auto cellB = [&]() { return static_cast<int64_t>(pb >> 32); };
   int k = 1;
@@ -195,13 +194,6 @@ uint64_t LineDrawer::drawRay(const RayGrid& g, const Eigen::Vector3d& W_dir, con
     // centre plane: free (u < front), rising (u < -c/2), peak (|u| <= c/2),
     // falling (u > c/2). Free and peak cells share one value; in the rising
     // and falling runs the table position moves by a constant step.
-    const float hc = profile.half_cell_m;
-    const int k_rise = k_free, k_peak = firstWith(-hc), k_fall = firstWith(hc);
-    const float dx = dtf * cf * profile.samples_per_m;
-    const float x_max = (LogOddsTable::kFrontSigmas + LogOddsTable::kTailSigmas) * LogOddsTable::kSamplesPerSigma;
-    auto sampleAt = [&](int kk, float e_shift) {  // table position of inner cell kk
-      return ((t1 + (kk - 1) * dtf) * cf - profile.l_p_m + e_shift - profile.row_origin_m) * profile.samples_per_m;
-    };
     auto advance = [&]() {
       pa += dta;
       pb += dtb;
@@ -212,28 +204,37 @@ uint64_t LineDrawer::drawRay(const RayGrid& g, const Eigen::Vector3d& W_dir, con
 #if STEREO_OCCUPANCY_X86_64_SIMD
     if (g_simd_level == SimdLevel::kSse2 && sa <= 0xffffffffLL && sb <= 0xffffffffLL) {
       FreeRun run{pa, pb, idx_m, dta, dtb, didx_m, sa, sb};
-      k = freeRunSse2(data, k, k_rise, free_value, &run);
+      k = freeRunSse2(data, k, k_free, free_value, &run);
       pa = run.pa;
       pb = run.pb;
       idx_m = run.idx_m;
     }
 #endif
-    for (; k < k_rise; ++k, advance()) put(idx_m + cellA() * sa + cellB() * sb, free_value);
-    float x = sampleAt(k, hc);
-    for (; k < k_peak; ++k, x += dx, advance())
-      put(idx_m + cellA() * sa + cellB() * sb, profile.sample(std::max(x, 0.0f)));
-    const float peak = profile.sample((-profile.row_origin_m) * profile.samples_per_m);
-    for (; k < k_fall; ++k, advance()) put(idx_m + cellA() * sa + cellB() * sb, peak);
-    x = sampleAt(k, -hc);
-    for (; k < n - 1; ++k, x += dx, advance())
-      put(idx_m + cellA() * sa + cellB() * sb, profile.sample(std::min(x, x_max)));
+    for (; k < k_free; ++k, advance()) put(idx_m + cellA() * sa + cellB() * sb, free_value);
+    if (k < n - 1) {  // the measurement's window reaches the inner slabs
+      const float hc = profile.half_cell_m;
+      const int k_peak = firstWith(-hc), k_fall = firstWith(hc);
+      const float dx = dtf * cf * profile.samples_per_m;
+      const float x_max = (LogOddsTable::kFrontSigmas + LogOddsTable::kTailSigmas) * LogOddsTable::kSamplesPerSigma;
+      auto sampleAt = [&](int kk, float e_shift) {  // table position of inner cell kk
+        return ((t1 + (kk - 1) * dtf) * cf - profile.l_p_m + e_shift - profile.row_origin_m) * profile.samples_per_m;
+      };
+      float x = sampleAt(k, hc);
+      for (; k < k_peak; ++k, x += dx, advance())
+        put(idx_m + cellA() * sa + cellB() * sb, profile.sample(std::max(x, 0.0f)));
+      const float peak = profile.sample((-profile.row_origin_m) * profile.samples_per_m);
+      for (; k < k_fall; ++k, advance()) put(idx_m + cellA() * sa + cellB() * sb, peak);
+      x = sampleAt(k, -hc);
+      for (; k < n - 1; ++k, x += dx, advance())
+        put(idx_m + cellA() * sa + cellB() * sb, profile.sample(std::min(x, x_max)));
+    }
     written += static_cast<uint64_t>(n - 2);
   } else {
     float t = t1;
     for (; k < n - 1; ++k, t += dtf, pa += dta, pb += dtb) {
       const int64_t ka = cellA(), kb = cellB();
       const int km = k0 + k * step;
-      if (km < 0 || km > nm || ka < 0 || ka > na || kb < 0 || kb > nb) continue;
+      if (km < 0 || km >= size[m] || ka < 0 || ka >= size[a] || kb < 0 || kb >= size[b]) continue;
       put(km * stride[m] + ka * sa + kb * sb, k < k_free ? profile.free_log_odds : profile.at(t * cf));
       ++written;
     }
