@@ -70,9 +70,13 @@ bool MapAccumulator::integrate(const GridUpdate& update, std::string* why) {
   // is about a third faster than the storage order (docs/performance.md).
   AccumulatingOcTree::LeafUpdater updater(tree_.get());
   auto add = [&](const Eigen::Vector3i& g, float log_odds) {
-    const Eigen::Vector3i k = g.array() + offset;
-    if ((k.array() < 0).any() || (k.array() > 65535).any()) return;  // outside OcTree's extent
-    updater.add(octomap::OcTreeKey(k.x(), k.y(), k.z()), log_odds);  // = updateNode(key, log_odds, lazy)
+    const uint64_t kx = static_cast<uint64_t>(int64_t{g.x()} + offset);  // a negative key wraps to above 65535
+    const uint64_t ky = static_cast<uint64_t>(int64_t{g.y()} + offset);
+    const uint64_t kz = static_cast<uint64_t>(int64_t{g.z()} + offset);
+    if ((kx | ky | kz) > 65535u) return;  // outside OcTree's extent
+    updater.add(octomap::OcTreeKey(static_cast<octomap::key_type>(kx), static_cast<octomap::key_type>(ky),
+                                   static_cast<octomap::key_type>(kz)),
+                log_odds);  // = updateNode(key, log_odds, lazy)
   };
   update.forEachCellBySiblings(add);
   inner_stale_ = true;

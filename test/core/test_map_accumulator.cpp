@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <random>
 #include <set>
@@ -82,6 +83,54 @@ TEST(GridUpdate, EncodesKnownCellsAsRuns) {
   bad = u;
   bad.size = Eigen::Vector3i(2, 2, 2);  // runs past the grid's end
   EXPECT_FALSE(bad.isConsistent(&why));
+}
+
+// Every value is checked, wherever it stands; finite extremes pass.
+TEST(GridUpdate, RefusesNonFiniteValues) {
+  LocalGrid grid;
+  grid.reset(Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(37, 1, 1), 0.25);
+  for (int x = 0; x < 37; ++x) grid.at(x, 0, 0) = 0.1f * (x + 1);
+  GridUpdate u;
+  encodeGridUpdate(grid, Eigen::Vector3d::Zero(), &u);
+  ASSERT_EQ(u.numCells(), 37u);
+  std::string why;
+  const float finite[] = {std::numeric_limits<float>::max(), -std::numeric_limits<float>::max(),
+                          std::numeric_limits<float>::denorm_min(), -0.0f};
+  for (float v : finite) {
+    GridUpdate ok = u;
+    ok.log_odds[36] = v;
+    EXPECT_TRUE(ok.isConsistent(&why)) << v << ": " << why;
+  }
+  const float not_finite[] = {std::numeric_limits<float>::quiet_NaN(), -std::numeric_limits<float>::quiet_NaN(),
+                              std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity()};
+  for (float v : not_finite)
+    for (size_t at : {size_t{0}, size_t{17}, size_t{36}}) {
+      GridUpdate bad = u;
+      bad.log_odds[at] = v;
+      why.clear();
+      EXPECT_FALSE(bad.isConsistent(&why)) << v << " at " << at;
+      EXPECT_NE(why.find("not finite"), std::string::npos) << why;
+    }
+}
+
+// OcTree keys run from 0 to 65535 (global index -32768 .. 32767 at depth
+// 16); cells beyond them are left out, the others are kept.
+TEST(MapAccumulator, LeavesOutCellsBeyondTheKeyRange) {
+  MapAccumulator map(MapAccumulatorConfig{});
+  const int kFirst = -32768, kLast = 32767;
+  const Eigen::Vector3i kept[] = {{kFirst, 0, 0}, {kLast, kLast, kLast}, {0, kFirst, kLast}};
+  const Eigen::Vector3i left_out[] = {{kFirst - 1, 0, 0}, {0, kLast + 1, 0}, {0, 0, kFirst - 1}, {1 << 30, 0, 0}};
+  for (const auto& g : kept) ASSERT_TRUE(map.integrate(singleCell(g, 1.0f)));
+  for (const auto& g : left_out) ASSERT_TRUE(map.integrate(singleCell(g, 1.0f)));
+  size_t leaves = 0;
+  for (auto it = map.tree().begin_leafs(), end = map.tree().end_leafs(); it != end; ++it) {
+    ++leaves;
+    const octomap::OcTreeKey k = it.getKey();
+    const Eigen::Vector3i g(k[0] - 32768, k[1] - 32768, k[2] - 32768);
+    EXPECT_TRUE(g == kept[0] || g == kept[1] || g == kept[2]) << g.transpose();
+    EXPECT_NEAR(it->getLogOdds(), 1.0f, 1e-6);
+  }
+  EXPECT_EQ(leaves, 3u);
 }
 
 TEST(MapAccumulator, AddsLogOddsWithClamping) {
