@@ -5,6 +5,7 @@
 
 #include <octomap/OcTree.h>
 
+#include <algorithm>
 #include <array>
 
 namespace stereo_occupancy {
@@ -28,8 +29,16 @@ class AccumulatingOcTree : public octomap::OcTree {
    public:
     explicit LeafUpdater(AccumulatingOcTree* tree) : tree_(tree) {}
     void add(const octomap::OcTreeKey& key, float log_odds);
+    /// add() for each of a node's eight leaves that has a value, in child
+    /// order: leaf i has the key @p first + (i & 1, (i >> 1) & 1, i >> 2)
+    /// (@p first's components even) and the log-odds values[i], NaN for none.
+    void addSiblings(const octomap::OcTreeKey& first, const float (&values)[8]);
 
    private:
+    /// add()'s walk from the node at @p depth on the previous key's path
+    /// (a common ancestor of the two keys); @p created: that node is new.
+    void descend(const octomap::OcTreeKey& key, float log_odds, int depth, bool created);
+
     AccumulatingOcTree* tree_;
     std::array<octomap::OcTreeNode*, 17> path_{};  ///< path_[d]: the previous key's node at depth d
     int known_depth_ = -1;                         ///< path_[0 .. known_depth_] is valid
@@ -67,6 +76,13 @@ inline void AccumulatingOcTree::LeafUpdater::add(const octomap::OcTreeKey& key, 
     if (depth > known_depth_) depth = known_depth_;
   }
   previous_ = key;
+  descend(key, log_odds, depth, created);
+}
+
+inline void AccumulatingOcTree::LeafUpdater::descend(const octomap::OcTreeKey& key, float log_odds, int depth,
+                                                     bool created) {
+  AccumulatingOcTree& t = *tree_;
+  const int leaf_depth = static_cast<int>(t.tree_depth);
   // A clamped node takes no update (updateNode's early return). search()
   // would return the deepest existing node on the path if it has no
   // children (a leaf, possibly pruned), nothing if a child is missing.
@@ -95,6 +111,25 @@ inline void AccumulatingOcTree::LeafUpdater::add(const octomap::OcTreeKey& key, 
   known_depth_ = leaf_depth;
   if (!created && saturated(node)) return;
   t.updateNodeLogOdds(node, log_odds);
+}
+
+inline void AccumulatingOcTree::LeafUpdater::addSiblings(const octomap::OcTreeKey& first, const float (&values)[8]) {
+  bool added = false;
+  for (int i = 0; i < 8; ++i) {
+    if (!(values[i] == values[i])) continue;
+    const octomap::OcTreeKey key(static_cast<octomap::key_type>(first[0] + (i & 1)),
+                                 static_cast<octomap::key_type>(first[1] + ((i >> 1) & 1)),
+                                 static_cast<octomap::key_type>(first[2] + (i >> 2)));
+    if (!added) {
+      add(key, values[i]);
+      added = true;
+      continue;
+    }
+    // A sibling of the previous key: their deepest common ancestor is the
+    // parent (what add() finds), or the node the previous walk stopped at.
+    previous_ = key;
+    descend(key, values[i], std::min(static_cast<int>(tree_->tree_depth) - 1, known_depth_), false);
+  }
 }
 
 }  // namespace stereo_occupancy

@@ -65,10 +65,26 @@ struct GridUpdate {
   /// Requires isConsistent().
   template <typename F>
   void forEachCellBySiblings(F&& f) const;
+
+  /// The walk of forEachCellBySiblings() a block at a time: calls
+  /// f(first_global_index, values) for every 2x2x2 block at even global
+  /// indices that holds a cell, where values[i] is the value of the cell at
+  /// first_global_index + (i & 1, (i >> 1) & 1, i >> 2) (octree child order),
+  /// NaN where the update has no cell. Requires isConsistent().
+  template <typename F>
+  void forEachSiblingBlock(F&& f) const;
 };
 
 template <typename F>
 void GridUpdate::forEachCellBySiblings(F&& f) const {
+  forEachSiblingBlock([&](const Eigen::Vector3i& first, const float(&values)[8]) {
+    for (int i = 0; i < 8; ++i)
+      if (values[i] == values[i]) f(first + Eigen::Vector3i(i & 1, (i >> 1) & 1, i >> 2), values[i]);
+  });
+}
+
+template <typename F>
+void GridUpdate::forEachSiblingBlock(F&& f) const {
   const int nx = size.x(), ny = size.y(), nz = size.z();
   if (log_odds.empty()) return;
   // Each row's stretch of known cells, [x0, x1) with values from log_odds[v]
@@ -118,22 +134,26 @@ void GridUpdate::forEachCellBySiblings(F&& f) const {
       const int width = x_max - xs;
       for (int q = 0; q < 4; ++q) {
         if (first[q] == last[q]) continue;
-        rows[q].assign(width, std::numeric_limits<float>::quiet_NaN());  // NaN: no cell (values are finite)
+        // NaN: no cell (values are finite); one more than the width for the last block's second column.
+        rows[q].assign(width + 1, std::numeric_limits<float>::quiet_NaN());
         for (uint32_t k = first[q]; k < last[q]; ++k)
           std::copy(log_odds.begin() + segments[k].v, log_odds.begin() + segments[k].v + (segments[k].x1 - segments[k].x0),
                     rows[q].begin() + (segments[k].x0 - xs));
       }
-      for (int x0 = xs; x0 < x_max; x0 += 2)
+      for (int x0 = xs; x0 < x_max; x0 += 2) {
+        float values[8];
+        bool any = false;
         for (int q = 0; q < 4; ++q) {
-          if (first[q] == last[q]) continue;
-          for (int dx = 0; dx < 2; ++dx) {
-            const int x = x0 + dx;
-            if (x >= x_max) break;
-            const float value = rows[q][x - xs];
-            if (value == value)
-              f(origin_index + Eigen::Vector3i(x, y0 + (q & 1), z0 + (q >> 1)), value);
+          if (first[q] == last[q]) {
+            values[2 * q] = values[2 * q + 1] = std::numeric_limits<float>::quiet_NaN();
+            continue;
           }
+          values[2 * q] = rows[q][x0 - xs];
+          values[2 * q + 1] = rows[q][x0 + 1 - xs];
+          any |= (values[2 * q] == values[2 * q]) | (values[2 * q + 1] == values[2 * q + 1]);
         }
+        if (any) f(origin_index + Eigen::Vector3i(x0, y0, z0), values);
+      }
     }
   }
 }

@@ -69,16 +69,16 @@ bool MapAccumulator::integrate(const GridUpdate& update, std::string* why) {
   // lie together in memory for the next update too. Over a flight this walk
   // is about a third faster than the storage order (docs/performance.md).
   AccumulatingOcTree::LeafUpdater updater(tree_.get());
-  auto add = [&](const Eigen::Vector3i& g, float log_odds) {
+  update.forEachSiblingBlock([&](const Eigen::Vector3i& g, const float(&values)[8]) {
+    // The block's first key; with it even and at most 65534 the block lies within OcTree's extent.
     const uint64_t kx = static_cast<uint64_t>(int64_t{g.x()} + offset);  // a negative key wraps to above 65535
     const uint64_t ky = static_cast<uint64_t>(int64_t{g.y()} + offset);
     const uint64_t kz = static_cast<uint64_t>(int64_t{g.z()} + offset);
-    if ((kx | ky | kz) > 65535u) return;  // outside OcTree's extent
-    updater.add(octomap::OcTreeKey(static_cast<octomap::key_type>(kx), static_cast<octomap::key_type>(ky),
-                                   static_cast<octomap::key_type>(kz)),
-                log_odds);  // = updateNode(key, log_odds, lazy)
-  };
-  update.forEachCellBySiblings(add);
+    if ((kx | ky | kz) > 65535u) return;  // outside OcTree's extent (cells on its far side start at 65536)
+    updater.addSiblings(octomap::OcTreeKey(static_cast<octomap::key_type>(kx), static_cast<octomap::key_type>(ky),
+                                           static_cast<octomap::key_type>(kz)),
+                        values);  // = updateNode(key, log_odds, lazy) per cell
+  });
   inner_stale_ = true;
   W_last_origin_ = update.W_sensor_origin;
   ++updates_;

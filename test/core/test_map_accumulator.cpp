@@ -316,6 +316,30 @@ TEST(AccumulatingOcTree, LeafUpdaterEqualsUpdateNode) {
     }
     ASSERT_EQ(fullTree(fast), fullTree(plain)) << "pass " << pass;
   }
+  // The same grid's 2x2x2 blocks with addSiblings(), some cells missing
+  // (NaN), three times: it clamps leaves, and walks from pruned clamped
+  // nodes (where the first sibling stops) to siblings of either sign.
+  for (int pass = 0; pass < 3; ++pass) {
+    AccumulatingOcTree::LeafUpdater updater(&fast);
+    for (int z = -2; z < 4; z += 2)
+      for (int y = -2; y < 6; y += 2)
+        for (int x = -2; x < 16; x += 2) {
+          float block[8];
+          for (int i = 0; i < 8; ++i) {
+            block[i] = rng() % 4 == 0 ? std::numeric_limits<float>::quiet_NaN() : values[rng() % 6];
+            if (block[i] == block[i])
+              plain.updateNode(octomap::OcTreeKey(o + x + (i & 1), o + y + ((i >> 1) & 1), o + z + (i >> 2)),
+                               block[i], true);
+          }
+          updater.addSiblings(octomap::OcTreeKey(o + x, o + y, o + z), block);
+        }
+    ASSERT_EQ(fullTree(fast), fullTree(plain)) << "block pass " << pass;
+    fast.updateInnerOccupancy();
+    plain.updateInnerOccupancy();
+    fast.prune();
+    plain.prune();
+    ASSERT_EQ(fullTree(fast), fullTree(plain)) << "block pass " << pass << ", pruned";
+  }
   // Random keys, far apart and close, with repeats.
   AccumulatingOcTree::LeafUpdater updater(&fast);
   for (int i = 0; i < 20000; ++i) {
@@ -327,6 +351,42 @@ TEST(AccumulatingOcTree, LeafUpdaterEqualsUpdateNode) {
     plain.updateNode(key, value, true);
   }
   EXPECT_EQ(fast.size(), plain.size());
+  EXPECT_EQ(fullTree(fast), fullTree(plain));
+}
+
+// addSiblings() in a pruned 4x4x4 block of clamped free space: the first
+// sibling stops at the pruned node (depth 14, above the leaves' parent), the
+// next one, occupied, must walk on from there and expand it.
+TEST(AccumulatingOcTree, SiblingsWalkOnFromAPrunedNode) {
+  const double res = 0.25;
+  AccumulatingOcTree fast(res);
+  octomap::OcTree plain(res);
+  const uint16_t o = 32768;
+  for (int i = 0; i < 64; ++i)
+    for (int r = 0; r < 6; ++r) {
+      const octomap::OcTreeKey key(o + (i & 3), o + ((i >> 2) & 3), o + (i >> 4));
+      AccumulatingOcTree::LeafUpdater(&fast).add(key, -0.4f);
+      plain.updateNode(key, -0.4f, true);
+    }
+  for (octomap::OcTree* tree : {static_cast<octomap::OcTree*>(&fast), &plain}) {
+    tree->updateInnerOccupancy();
+    tree->prune();
+  }
+  ASSERT_EQ(fullTree(fast), fullTree(plain));
+  ASSERT_EQ(plain.getNumLeafNodes(), 1u) << "the block was not pruned";
+  AccumulatingOcTree::LeafUpdater updater(&fast);
+  const octomap::OcTreeKey elsewhere(o + 40, o, o);  // a walk to another leaf first
+  updater.add(elsewhere, 0.3f);
+  plain.updateNode(elsewhere, 0.3f, true);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float block[8] = {-0.4f, 0.85f, nan, -0.4f, 0.3f, nan, nan, -0.4f};
+  const octomap::OcTreeKey first(o + 2, o + 2, o);
+  updater.addSiblings(first, block);
+  for (int i = 0; i < 8; ++i)
+    if (block[i] == block[i])
+      plain.updateNode(octomap::OcTreeKey(first[0] + (i & 1), first[1] + ((i >> 1) & 1), first[2] + (i >> 2)),
+                       block[i], true);
+  EXPECT_GT(plain.getNumLeafNodes(), 2u) << "the pruned block was not expanded";
   EXPECT_EQ(fullTree(fast), fullTree(plain));
 }
 
@@ -367,6 +427,21 @@ TEST(GridUpdate, SiblingOrderVisitsEveryCellOnceBlockByBlock) {
       first = false;
     });
     ASSERT_EQ(seen, expected) << "trial " << trial;
+    // The same cells a block at a time: blocks at even global indices, each once and holding a cell.
+    std::map<std::array<int, 3>, float> from_blocks;
+    std::set<std::array<int, 3>> blocks;
+    u.forEachSiblingBlock([&](const Eigen::Vector3i& g, const float(&values)[8]) {
+      EXPECT_TRUE(((g.x() | g.y() | g.z()) & 1) == 0) << g.transpose();
+      EXPECT_TRUE(blocks.insert({g.x(), g.y(), g.z()}).second) << "a block twice";
+      int held = 0;
+      for (int i = 0; i < 8; ++i)
+        if (values[i] == values[i]) {
+          ++held;
+          from_blocks[{g.x() + (i & 1), g.y() + ((i >> 1) & 1), g.z() + (i >> 2)}] = values[i];
+        }
+      EXPECT_GT(held, 0);
+    });
+    ASSERT_EQ(from_blocks, expected) << "trial " << trial;
   }
 }
 
