@@ -85,62 +85,65 @@ void GridUpdate::forEachCellBySiblings(F&& f) const {
 
 template <typename F>
 void GridUpdate::forEachSiblingBlock(F&& f) const {
-  const int nx = size.x(), ny = size.y(), nz = size.z();
   if (log_odds.empty()) return;
+  // Memory and work follow the runs, never the box the update claims: a
+  // message may claim 65535 x 65535 cells and carry one.
+  const int64_t nx = size.x(), ny = size.y();
   // Each row's stretch of known cells, [x0, x1) with values from log_odds[v]
-  // on; a run may go on into the next row.
+  // on; a run may go on into the next row. Sorted by row, then x.
   struct Segment {
-    int x0, x1;
+    int64_t y, z, x0, x1;
     size_t v;
   };
   std::vector<Segment> segments;
-  std::vector<uint32_t> row_first(static_cast<size_t>(ny) * nz + 1, 0);  // segments of row r: [row_first[r], row_first[r+1])
+  segments.reserve(run_start.size());
   size_t v = 0;
   for (size_t k = 0; k < run_start.size(); ++k) {
     uint64_t i = run_start[k], left = run_length[k];
     while (left > 0) {
-      const uint64_t r = i / nx;
-      const int x0 = static_cast<int>(i % nx);
-      const int len = static_cast<int>(std::min<uint64_t>(left, static_cast<uint64_t>(nx - x0)));
-      segments.push_back({x0, x0 + len, v});
-      ++row_first[r + 1];
-      v += len;
-      i += len;
-      left -= len;
+      const int64_t row = static_cast<int64_t>(i / static_cast<uint64_t>(nx));
+      const int64_t x0 = static_cast<int64_t>(i % static_cast<uint64_t>(nx));
+      const int64_t len = std::min<int64_t>(static_cast<int64_t>(left), nx - x0);
+      segments.push_back({row % ny, row / ny, x0, x0 + len, v});
+      v += static_cast<size_t>(len);
+      i += static_cast<uint64_t>(len);
+      left -= static_cast<uint64_t>(len);
     }
   }
-  for (size_t r = 1; r < row_first.size(); ++r) row_first[r] += row_first[r - 1];
-  // Local index of the first brick along an axis: global index even.
-  auto evenStart = [](int origin) { return (origin & 1) != 0 ? -1 : 0; };
-  std::vector<float> rows[4];
-  for (int z0 = evenStart(origin_index.z()); z0 < nz; z0 += 2) {
-    for (int y0 = evenStart(origin_index.y()); y0 < ny; y0 += 2) {
-      // The four rows of this strip of bricks, q = dy + 2 dz.
-      uint32_t first[4], last[4];
-      int x_min = nx, x_max = 0;
-      for (int q = 0; q < 4; ++q) {
-        const int y = y0 + (q & 1), z = z0 + (q >> 1);
-        first[q] = last[q] = 0;
-        if (y < 0 || y >= ny || z < 0 || z >= nz) continue;
-        const size_t r = static_cast<size_t>(y) + static_cast<size_t>(ny) * z;
-        first[q] = row_first[r];
-        last[q] = row_first[r + 1];
-        if (first[q] == last[q]) continue;
-        x_min = std::min(x_min, segments[first[q]].x0);
-        x_max = std::max(x_max, segments[last[q] - 1].x1);
+  // Local index of the 2x2x2 block (even global index) a local index is in, and the end of its block.
+  const int64_t ox = origin_index.x(), oy = origin_index.y(), oz = origin_index.z();
+  auto blockStart = [](int64_t local, int64_t origin) { return local - ((origin + local) & 1); };
+  auto blockEnd = [](int64_t local_end, int64_t origin) { return local_end + ((origin + local_end) & 1); };
+  std::vector<float> rows[4];  // q = dy + 2 dz: one cluster's four rows, NaN where no cell
+  // A strip: the four rows (y0 + dy, z0 + dz) of one line of blocks; its
+  // segments per row are the ranges [begin[q], end[q]) of `segments`.
+  auto visitStrip = [&](int64_t y0, int64_t z0, const size_t (&begin)[4], const size_t (&end)[4]) {
+    size_t next[4] = {begin[0], begin[1], begin[2], begin[3]};
+    for (;;) {
+      // A cluster: the segments whose blocks overlap, in x order; rows[q] spans it.
+      int64_t xs = std::numeric_limits<int64_t>::max();
+      for (int q = 0; q < 4; ++q)
+        if (next[q] < end[q]) xs = std::min(xs, blockStart(segments[next[q]].x0, ox));
+      if (xs == std::numeric_limits<int64_t>::max()) return;
+      size_t first[4], last[4];
+      for (int q = 0; q < 4; ++q) first[q] = last[q] = next[q];
+      int64_t xe = xs;  // the cluster's blocks: [xs, xe), each segment adding at most its length + 2
+      for (bool grew = true; grew;) {
+        grew = false;
+        for (int q = 0; q < 4; ++q)
+          for (; last[q] < end[q] && blockStart(segments[last[q]].x0, ox) <= xe; ++last[q], grew = true)
+            xe = std::max(xe, blockEnd(segments[last[q]].x1, ox));
       }
-      if (x_min >= x_max) continue;
-      const int xs = x_min - ((origin_index.x() + x_min) & 1);  // even global index
-      const int width = x_max - xs;
+      const size_t width = static_cast<size_t>(xe - xs);
       for (int q = 0; q < 4; ++q) {
         if (first[q] == last[q]) continue;
-        // NaN: no cell (values are finite); one more than the width for the last block's second column.
-        rows[q].assign(width + 1, std::numeric_limits<float>::quiet_NaN());
-        for (uint32_t k = first[q]; k < last[q]; ++k)
+        rows[q].assign(width, std::numeric_limits<float>::quiet_NaN());
+        for (size_t k = first[q]; k < last[q]; ++k)
           std::copy(log_odds.begin() + segments[k].v, log_odds.begin() + segments[k].v + (segments[k].x1 - segments[k].x0),
                     rows[q].begin() + (segments[k].x0 - xs));
+        next[q] = last[q];
       }
-      for (int x0 = xs; x0 < x_max; x0 += 2) {
+      for (int64_t x0 = xs; x0 < xe; x0 += 2) {
         float values[8];
         bool any = false;
         for (int q = 0; q < 4; ++q) {
@@ -152,8 +155,39 @@ void GridUpdate::forEachSiblingBlock(F&& f) const {
           values[2 * q + 1] = rows[q][x0 + 1 - xs];
           any |= (values[2 * q] == values[2 * q]) | (values[2 * q + 1] == values[2 * q + 1]);
         }
-        if (any) f(origin_index + Eigen::Vector3i(x0, y0, z0), values);
+        if (any)
+          f(Eigen::Vector3i(static_cast<int>(ox + x0), static_cast<int>(oy + y0), static_cast<int>(oz + z0)), values);
       }
+    }
+  };
+  // The strips in z, then y order: a pair of planes (z0, z0 + 1) are two
+  // consecutive ranges of segments, each sorted by y; merge them by block row.
+  size_t s = 0;
+  while (s < segments.size()) {
+    const int64_t z0 = blockStart(segments[s].z, oz);
+    size_t plane_end[2], cursor[2];
+    cursor[0] = s;
+    size_t e = s;
+    while (e < segments.size() && segments[e].z == z0) ++e;
+    plane_end[0] = e;
+    cursor[1] = e;
+    while (e < segments.size() && segments[e].z == z0 + 1) ++e;
+    plane_end[1] = e;
+    s = e;
+    for (;;) {
+      int64_t y0 = std::numeric_limits<int64_t>::max();
+      for (int p = 0; p < 2; ++p)
+        if (cursor[p] < plane_end[p]) y0 = std::min(y0, blockStart(segments[cursor[p]].y, oy));
+      if (y0 == std::numeric_limits<int64_t>::max()) break;
+      size_t begin[4], end[4];
+      for (int q = 0; q < 4; ++q) {
+        const int p = q >> 1;
+        const int64_t y = y0 + (q & 1);
+        begin[q] = cursor[p];
+        while (cursor[p] < plane_end[p] && segments[cursor[p]].y == y) ++cursor[p];
+        end[q] = cursor[p];
+      }
+      visitStrip(y0, z0, begin, end);
     }
   }
 }

@@ -5,6 +5,7 @@
 
 #include <octomap/OcTree.h>
 
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -21,9 +22,12 @@ struct MapAccumulatorConfig {
   double clamping_min_prob = 0.12;   ///< lower clamping bound of a cell (probability)
   double clamping_max_prob = 0.97;   ///< upper clamping bound of a cell (probability)
   double occupancy_threshold_prob = 0.5;  ///< cells above it are occupied (probability)
-  /// Half edge of the cube around the latest sensor origin that the map keeps;
-  /// cells outside it are dropped on prune(). 0 keeps everything [m].
+  /// Half edge of the cube around the vehicle's recent positions that the map
+  /// keeps; cells outside it are dropped on prune(). 0 keeps everything [m].
   double max_extent_m = 500.0;
+  /// Largest box an update may claim (nx·ny·nz); larger ones are refused
+  /// before anything is allocated. As DrawingConfig::max_grid_cells.
+  uint64_t max_update_cells = uint64_t{64} << 20;
 
   bool isValid(std::string* why = nullptr) const;
 };
@@ -39,14 +43,26 @@ class MapAccumulator {
   /// The map, its inner nodes brought up to date first.
   const octomap::OcTree& tree() const;
 
-  /// Adds every cell's log-odds to the map (octomap's clamped update).
-  /// Returns false, leaving the map unchanged, if the update is inconsistent
-  /// or of another resolution; @p why says why.
+  /// True if integrate() would take @p update: consistent (GridUpdate::isConsistent),
+  /// of the map's resolution, a box of at most max_update_cells cells that lies
+  /// inside the OcTree's key range, and a sensor origin near the box (within
+  /// its largest edge). Costs O(runs), allocates nothing. Otherwise false
+  /// and @p why says what is wrong.
+  bool admits(const GridUpdate& update, std::string* why = nullptr) const;
+
+  /// Adds every cell's log-odds to the map (octomap's clamped update). Work
+  /// and memory follow the cells carried, not the box claimed. Returns
+  /// false, leaving the map unchanged, if admits() refuses the update.
   bool integrate(const GridUpdate& update, std::string* why = nullptr);
 
-  /// Drops the cells outside the cube of max_extent_m around the latest
-  /// sensor origin; returns how many leaves were dropped.
+  /// Drops the cells farther than max_extent_m (per axis) from the bounding
+  /// box of the last kPruneOrigins sensor origins: no single update, however
+  /// far its origin, can make the map drop what the vehicle is near. Returns
+  /// how many leaves were dropped.
   size_t prune();
+
+  /// Sensor origins that prune() keeps the map around.
+  static constexpr size_t kPruneOrigins = 100;
 
   /// Empties the map.
   void reset();
@@ -55,8 +71,10 @@ class MapAccumulator {
   size_t updates() const { return updates_; }
 
   /// Writes <directory>/<base_name>.bt and .ot, each through a temporary file
-  /// renamed into place, so a crash never leaves a half-written map.
-  /// @return the two paths. @throws std::runtime_error.
+  /// that is synced to disk and then renamed into place (writeOcTree), so a
+  /// crash or a full disk never leaves a half-written map.
+  /// @return the two paths. @throws std::runtime_error naming the file and the
+  /// reason (e.g. "No space left on device"); the previous file then stays.
   std::vector<std::string> save(const std::string& directory, const std::string& base_name) const;
 
  private:
@@ -64,7 +82,8 @@ class MapAccumulator {
 
   MapAccumulatorConfig config_;
   std::unique_ptr<AccumulatingOcTree> tree_;
-  Eigen::Vector3d W_last_origin_ = Eigen::Vector3d::Zero();
+  std::vector<Eigen::Vector3d> W_recent_origins_;  ///< ring of the last kPruneOrigins sensor origins
+  size_t next_origin_ = 0;                          ///< where the next one goes in the ring
   size_t updates_ = 0;
   mutable bool inner_stale_ = false;  ///< inner nodes lag the leaves until tree() is called
 };

@@ -16,6 +16,9 @@ bool GridUpdate::isConsistent(std::string* why) const {
   if ((size.array() < 0).any()) return fail("negative grid size");
   const uint64_t cells = static_cast<uint64_t>(size.x()) * size.y() * size.z();
   if (cells > std::numeric_limits<uint32_t>::max()) return fail("grid too large for 32-bit cell indices");
+  for (int a = 0; a < 3; ++a)  // every global index origin_index + local fits an int
+    if (int64_t{origin_index[a]} + size[a] > std::numeric_limits<int>::max())
+      return fail("the grid reaches beyond the 32-bit index range");
   if (run_start.size() != run_length.size()) return fail("run_start and run_length differ in length");
   uint64_t total = 0, end = 0;
   for (size_t k = 0; k < run_start.size(); ++k) {
@@ -45,6 +48,9 @@ void encodeGridUpdate(const LocalGrid& grid, const Eigen::Vector3d& W_sensor_ori
   update->run_start.clear();
   update->run_length.clear();
   update->log_odds.clear();
+  releaseIfOversized(&update->log_odds, grid.numCells());
+  releaseIfOversized(&update->run_start, grid.numCells() / 2);
+  releaseIfOversized(&update->run_length, grid.numCells() / 2);
   const float* data = grid.data();
   const size_t n = grid.numCells();
   auto informative = [](float v) { return v != LocalGrid::kUnknown && v != 0.0f; };

@@ -28,12 +28,13 @@
 using namespace stereo_occupancy;
 
 namespace {
+/// An update of one cell, seen from the cell's centre.
 GridUpdate singleCell(const Eigen::Vector3i& g, float value, double res = 0.25) {
   LocalGrid grid;
   grid.reset(g, Eigen::Vector3i(1, 1, 1), res);
   grid.at(0, 0, 0) = value;
   GridUpdate u;
-  encodeGridUpdate(grid, Eigen::Vector3d::Zero(), &u);
+  encodeGridUpdate(grid, grid.cellCentre(0, 0, 0), &u);
   return u;
 }
 double logit(double p) { return std::log(p / (1.0 - p)); }
@@ -114,14 +115,22 @@ TEST(GridUpdate, RefusesNonFiniteValues) {
 }
 
 // OcTree keys run from 0 to 65535 (global index -32768 .. 32767 at depth
-// 16); cells beyond them are left out, the others are kept.
-TEST(MapAccumulator, LeavesOutCellsBeyondTheKeyRange) {
+// 16); an update whose box leaves them is refused whole, the others are kept.
+TEST(MapAccumulator, RefusesBoxesBeyondTheKeyRange) {
   MapAccumulator map(MapAccumulatorConfig{});
   const int kFirst = -32768, kLast = 32767;
   const Eigen::Vector3i kept[] = {{kFirst, 0, 0}, {kLast, kLast, kLast}, {0, kFirst, kLast}};
-  const Eigen::Vector3i left_out[] = {{kFirst - 1, 0, 0}, {0, kLast + 1, 0}, {0, 0, kFirst - 1}, {1 << 30, 0, 0}};
+  const Eigen::Vector3i refused[] = {{kFirst - 1, 0, 0}, {0, kLast + 1, 0}, {0, 0, kFirst - 1}, {1 << 30, 0, 0}};
   for (const auto& g : kept) ASSERT_TRUE(map.integrate(singleCell(g, 1.0f)));
-  for (const auto& g : left_out) ASSERT_TRUE(map.integrate(singleCell(g, 1.0f)));
+  std::string why;
+  for (const auto& g : refused) {
+    EXPECT_FALSE(map.integrate(singleCell(g, 1.0f), &why)) << g.transpose();
+    EXPECT_NE(why.find("key range"), std::string::npos) << why;
+  }
+  // A box inside the range at its origin but reaching past its end.
+  GridUpdate reaching = singleCell(Eigen::Vector3i(kLast, 0, 0), 1.0f);
+  reaching.size.x() = 2;
+  EXPECT_FALSE(map.integrate(reaching, &why));
   size_t leaves = 0;
   for (auto it = map.tree().begin_leafs(), end = map.tree().end_leafs(); it != end; ++it) {
     ++leaves;
@@ -131,6 +140,7 @@ TEST(MapAccumulator, LeavesOutCellsBeyondTheKeyRange) {
     EXPECT_NEAR(it->getLogOdds(), 1.0f, 1e-6);
   }
   EXPECT_EQ(leaves, 3u);
+  EXPECT_EQ(map.updates(), 3u);
 }
 
 TEST(MapAccumulator, AddsLogOddsWithClamping) {
@@ -169,14 +179,42 @@ TEST(MapAccumulator, PruneKeepsTheMapWithinItsExtent) {
   cfg.max_extent_m = 10.0;
   MapAccumulator map(cfg);
   ASSERT_TRUE(map.integrate(singleCell(Eigen::Vector3i(0, 0, 0), 1.0f)));
-  ASSERT_TRUE(map.integrate(singleCell(Eigen::Vector3i(200, 0, 0), 1.0f)));  // 50 m away
+  ASSERT_TRUE(map.integrate(singleCell(Eigen::Vector3i(200, 0, 0), 1.0f)));  // seen from 50 m away
+  EXPECT_EQ(map.prune(), 0u);  // both near a recent origin
+  // The vehicle stays near the origin for kPruneOrigins updates: the cell
+  // at 50 m goes, the ones near it stay.
   GridUpdate near = singleCell(Eigen::Vector3i(4, 0, 0), 1.0f);
   near.W_sensor_origin = Eigen::Vector3d(1.0, 0.0, 0.0);
-  ASSERT_TRUE(map.integrate(near));
+  for (size_t i = 0; i < MapAccumulator::kPruneOrigins; ++i) ASSERT_TRUE(map.integrate(near));
   EXPECT_EQ(map.prune(), 1u);
   EXPECT_EQ(map.tree().search(50.1, 0.1, 0.1), nullptr);
   EXPECT_NE(map.tree().search(0.1, 0.1, 0.1), nullptr);
   EXPECT_EQ(map.tree().getNumLeafNodes(), 2u);
+}
+
+// One update far away (an empty one, or one cell 5 km off with its origin
+// beside it) cannot make prune() drop the map the vehicle is in.
+TEST(MapAccumulator, OneFarUpdateDoesNotPruneTheMap) {
+  MapAccumulatorConfig cfg;
+  cfg.max_extent_m = 100.0;
+  MapAccumulator map(cfg);
+  GridUpdate here = singleCell(Eigen::Vector3i(8, 8, 8), 1.0f);
+  for (int i = 0; i < 64; ++i) {
+    here.origin_index.x() = 8 + i;
+    here.W_sensor_origin.x() = (8 + i + 0.5) * 0.25;
+    ASSERT_TRUE(map.integrate(here));
+  }
+  // An empty update whose origin is 10^6 m from its (empty) box: refused.
+  GridUpdate empty;
+  empty.resolution_m = 0.25;
+  empty.W_sensor_origin = Eigen::Vector3d(1e6, 0.0, 0.0);
+  std::string why;
+  EXPECT_FALSE(map.integrate(empty, &why));
+  EXPECT_NE(why.find("sensor origin"), std::string::npos) << why;
+  // A well-formed update 5 km away: taken, but the map near the vehicle stays.
+  ASSERT_TRUE(map.integrate(singleCell(Eigen::Vector3i(20000, 0, 0), 1.0f)));
+  EXPECT_EQ(map.prune(), 0u);
+  EXPECT_EQ(map.tree().getNumLeafNodes(), 65u);
 }
 
 TEST(MapAccumulator, SavedFilesReadBackAndReplaceAtomically) {
