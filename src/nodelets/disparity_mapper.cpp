@@ -21,6 +21,7 @@
 #include <boost/bind/bind.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <chrono>
 #include <ctime>
 #include <cstdio>
@@ -38,6 +39,13 @@
 namespace stereo_occupancy {
 
 namespace {
+
+/// Image stamps farther than this from the clock are not taken as a jump of
+/// the time line (a looping bag moves the clock with its stamps) [s].
+constexpr double kStampClockToleranceS = 10.0;
+
+/// Images arriving without one mapped for this long: look for world_frame in tf [s].
+constexpr double kNoProgressWarnS = 5.0;
 
 /// CPU time of the calling thread [ms].
 double threadCpuMs() {
@@ -80,6 +88,9 @@ class DisparityMapper : public nodelet::Nodelet {
   /// going backwards (a looping bag) and clears the poses of the old time line.
   template <class M>
   void arrival(const boost::shared_ptr<const M>& msg);
+  /// Images come but none has been mapped for a while: says whether
+  /// world_frame exists in tf at all (a typo, a missing localisation node).
+  void checkWorldFrame();
   /// Counts an image that has its pose; returns the latest camera_info (may be null).
   sensor_msgs::CameraInfoConstPtr noteImage();
   /// Counts and logs (throttled) an image refused for @p why.
@@ -115,6 +126,9 @@ class DisparityMapper : public nodelet::Nodelet {
   std::string last_problem_;
   ros::Time last_image_stamp_;
   uint64_t time_jumps_back_ = 0;
+  uint64_t images_arrived_ = 0;  ///< before the tf filter (images_received_ counts those with a pose)
+  uint64_t processed_at_last_check_ = 0, arrived_at_last_check_ = 0;
+  ros::WallTime last_progress_ = ros::WallTime::now();  ///< when images_processed_ last grew (checkWorldFrame)
 
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
@@ -194,7 +208,10 @@ void DisparityMapper::onInit() {
       diagnostic_updater::FrequencyStatusParam(&min_rate_hz_, &max_rate_hz_, 0.1, 10));
   diagnostics_->add(*input_rate_);
   diagnostics_->add("mapper", this, &DisparityMapper::diagnose);
-  diagnostics_timer_ = nh.createTimer(ros::Duration(1.0), [this](const ros::TimerEvent&) { diagnostics_->update(); });
+  diagnostics_timer_ = nh.createTimer(ros::Duration(1.0), [this](const ros::TimerEvent&) {
+    checkWorldFrame();
+    diagnostics_->update();
+  });
 
   NODELET_INFO("DisparityMapper: %s at %.3g m cells into frame '%s', range %.3g m, from '%s'",
                toString(params_.drawing.algorithm), params_.drawing.resolution_m, params_.world_frame.c_str(),
@@ -273,10 +290,15 @@ void DisparityMapper::transformFailure(const boost::shared_ptr<const M>& msg, tf
 template <class M>
 void DisparityMapper::arrival(const boost::shared_ptr<const M>& msg) {
   std::lock_guard<std::mutex> lock(mutex_);
+  ++images_arrived_;
+  // Only stamps near the clock speak for the time line: one image stamped 0
+  // (or a year ahead) must not clear the poses of every other image.
+  const ros::Time stamp = msg->header.stamp;
+  if (std::abs((stamp - ros::Time::now()).toSec()) > kStampClockToleranceS) return;
   // A looping bag or a restarted source: stamps jump back. The poses in the
   // tf buffer belong to the old time line (and tf2 refuses "old" data while
   // they are there); start over.
-  if (!last_image_stamp_.isZero() && msg->header.stamp + ros::Duration(1.0) < last_image_stamp_) {
+  if (!last_image_stamp_.isZero() && stamp + ros::Duration(1.0) < last_image_stamp_) {
     ++time_jumps_back_;
     last_problem_ = "image stamps went back";
     NODELET_WARN("image stamps went back by %.3f s (a looping bag?): clearing the tf buffer; the accumulated map "
@@ -284,7 +306,33 @@ void DisparityMapper::arrival(const boost::shared_ptr<const M>& msg) {
                  (last_image_stamp_ - msg->header.stamp).toSec());
     tf_buffer_->clear();
   }
-  last_image_stamp_ = msg->header.stamp;
+  last_image_stamp_ = stamp;
+}
+
+void DisparityMapper::checkWorldFrame() {
+  const DisparityMapperParameters params = parameters();
+  uint64_t arrived, processed;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    arrived = images_arrived_;
+    processed = images_processed_;
+    // The clock starts with the first image, and again with each one mapped.
+    if (processed != processed_at_last_check_ || (arrived > 0 && arrived_at_last_check_ == 0))
+      last_progress_ = ros::WallTime::now();
+    processed_at_last_check_ = processed;
+    arrived_at_last_check_ = arrived;
+  }
+  if (arrived == 0 || (ros::WallTime::now() - last_progress_).toSec() < kNoProgressWarnS) return;
+  if (tf_buffer_->_frameExists(params.world_frame)) return;
+  std::string frames = tf_buffer_->allFramesAsString();
+  std::replace(frames.begin(), frames.end(), '\n', ' ');
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    last_problem_ = "world_frame '" + params.world_frame + "' does not exist in tf";
+  }
+  NODELET_WARN_THROTTLE(10.0, "%lu images came but none was mapped for %.0f s: world_frame '%s' does not exist in tf "
+                        "(%s)", static_cast<unsigned long>(arrived), kNoProgressWarnS, params.world_frame.c_str(),
+                        frames.empty() ? "tf holds no frames" : frames.c_str());
 }
 
 sensor_msgs::CameraInfoConstPtr DisparityMapper::noteImage() {
@@ -319,7 +367,11 @@ void DisparityMapper::disparityCallback(const stereo_msgs::DisparityImageConstPt
   } catch (const cv_bridge::Exception& e) {
     return refuse(e.what());
   }
-  process(image->image, msg->header, camera);
+  try {
+    process(image->image, msg->header, camera);
+  } catch (const std::exception& e) {  // bad_alloc and the like: nothing may leave a callback
+    return refuse(std::string("mapping failed: ") + e.what());
+  }
   if (disparity_image_pub_.getNumSubscribers() > 0)
     disparity_image_pub_.publish(boost::make_shared<sensor_msgs::Image>(msg->image));  // a copy, only for viewers
 }
@@ -338,10 +390,10 @@ void DisparityMapper::depthCallback(const sensor_msgs::ImageConstPtr& msg) {
   try {
     const cv_bridge::CvImageConstPtr depth = cv_bridge::toCvShare(msg);
     depthToDisparity(depth->image, camera.baseline_m * camera.focal_length_px, &disparity);
-  } catch (const std::exception& e) {
+    process(disparity, msg->header, camera);
+  } catch (const std::exception& e) {  // nothing may leave a callback
     return refuse(e.what());
   }
-  process(disparity, msg->header, camera);
 }
 
 void DisparityMapper::process(const cv::Mat& disparity, const std_msgs::Header& header,
@@ -349,6 +401,15 @@ void DisparityMapper::process(const cv::Mat& disparity, const std_msgs::Header& 
   // The image waited in the tf filter until its pose was known; a pose that
   // came more than tf_timeout_s after the image makes it too old to use.
   const DisparityMapperParameters params = parameters();
+  if (header.stamp.isZero()) {
+    // tf2 reads time 0 as "the latest pose": the image would be drawn where
+    // the camera is now, not where it was.
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++dropped_invalid_;
+    last_problem_ = "image stamped 0";
+    NODELET_WARN_THROTTLE(5.0, "refused an image from '%s' stamped 0 (no time, no pose)", header.frame_id.c_str());
+    return;
+  }
   const double age_s = (ros::Time::now() - header.stamp).toSec();
   if (params.tf_timeout_s > 0.0 && age_s > params.tf_timeout_s) {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -438,6 +499,7 @@ void DisparityMapper::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
     status.summary(dropping ? diagnostic_msgs::DiagnosticStatus::WARN : diagnostic_msgs::DiagnosticStatus::OK,
                    dropping ? last_problem_ : "mapping");
   status.add("algorithm", toString(params_.drawing.algorithm));
+  status.add("images arrived", images_arrived_);
   status.add("images received", images_received_);
   status.add("images processed", images_processed_);
   status.add("dropped: no transform", dropped_no_transform_);

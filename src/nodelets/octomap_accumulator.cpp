@@ -31,6 +31,8 @@ class OctomapAccumulator : public nodelet::Nodelet {
  private:
   void onInit() override;
   void updateCallback(const OccupancyUpdateConstPtr& msg);
+  /// Counts and logs (throttled) an update refused for @p why; requires mutex_.
+  void refuseUpdate(const std::string& why);
   void publish(const ros::TimerEvent&);
   bool saveMap(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response);
   bool reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
@@ -42,10 +44,10 @@ class OctomapAccumulator : public nodelet::Nodelet {
   // Everything below is guarded by mutex_ (callbacks may run on several threads).
   std::mutex mutex_;
   std::unique_ptr<MapAccumulator> map_;
-  std::string frame_id_;
+  std::string frame_id_;  ///< the map's frame: world_frame, or the first update's
   ros::Time last_stamp_;
   ros::WallTime last_prune_;
-  uint64_t updates_received_ = 0, updates_refused_ = 0, leaves_pruned_ = 0;
+  uint64_t updates_received_ = 0, updates_refused_ = 0, leaves_pruned_ = 0, saves_failed_ = 0;
   double last_fusion_ms_ = 0.0, max_fusion_ms_ = 0.0;
   std::vector<double> fusion_ms_;  ///< per update, for the summary at shutdown (bounded)
   std::string last_problem_;
@@ -69,6 +71,7 @@ void OctomapAccumulator::onInit() {
     return;
   }
   map_ = std::make_unique<MapAccumulator>(params_.map);
+  frame_id_ = params_.world_frame;
   last_prune_ = ros::WallTime::now();
 
   octomap_pub_ = nh.advertise<Octomap>("octomap_binary", 1, /*latch=*/true);
@@ -86,7 +89,9 @@ void OctomapAccumulator::onInit() {
       try {
         save();
       } catch (const std::exception& e) {
-        NODELET_ERROR_THROTTLE(60.0, "periodic save failed: %s", e.what());
+        ++saves_failed_;
+        last_problem_ = std::string("periodic save failed: ") + e.what();
+        NODELET_ERROR_THROTTLE(60.0, "periodic save failed (the previous map file stays): %s", e.what());
       }
     });
   }
@@ -96,8 +101,9 @@ void OctomapAccumulator::onInit() {
   diagnostics_->add("accumulator", this, &OctomapAccumulator::diagnose);
   diagnostics_timer_ = nh.createTimer(ros::Duration(1.0), [this](const ros::TimerEvent&) { diagnostics_->update(); });
 
-  NODELET_INFO("OctomapAccumulator: %.3g m cells, map kept within %.0f m of the sensor, saving to '%s'",
-               params_.map.resolution_m, params_.map.max_extent_m,
+  NODELET_INFO("OctomapAccumulator: %.3g m cells in frame '%s', map kept within %.0f m of the vehicle, saving to '%s'",
+               params_.map.resolution_m, frame_id_.empty() ? "(the first update's)" : frame_id_.c_str(),
+               params_.map.max_extent_m,
                params_.save_dir.empty() ? "(nowhere)" : params_.save_dir.c_str());
 }
 
@@ -120,33 +126,46 @@ OctomapAccumulator::~OctomapAccumulator() {
       std::fprintf(stderr, "OctomapAccumulator: saved the map of %lu updates to %s on shutdown\n",
                    static_cast<unsigned long>(map_->updates()), path.c_str());
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "OctomapAccumulator: could not save the map on shutdown: %s\n", e.what());
+    std::fprintf(stderr, "OctomapAccumulator: could not save the map on shutdown (the previous map file stays): %s\n", e.what());
   }
 }
 
 void OctomapAccumulator::updateCallback(const OccupancyUpdateConstPtr& msg) {
-  GridUpdate update;
-  std::string why;
-  const bool ok = fromMsg(*msg, &update, &why);
+  // Any node may publish on this topic: everything is checked before the map
+  // is touched, and nothing may leave the callback (it would end the manager).
   std::lock_guard<std::mutex> lock(mutex_);
   ++updates_received_;
-  const auto start = std::chrono::steady_clock::now();
-  if (!ok || !map_->integrate(update, &why)) {
-    ++updates_refused_;
-    last_problem_ = why;
-    NODELET_WARN_THROTTLE(5.0, "refused an occupancy update: %s", why.c_str());
-    return;
+  std::string why;
+  try {
+    if (!frame_id_.empty() && msg->header.frame_id != frame_id_)
+      return refuseUpdate("frame '" + msg->header.frame_id + "', the map is in '" + frame_id_ + "'");
+    GridUpdate update;
+    if (!fromMsg(*msg, &update, &why)) return refuseUpdate(why);
+    const auto start = std::chrono::steady_clock::now();
+    if (!map_->integrate(update, &why)) return refuseUpdate(why);
+    last_fusion_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  } catch (const std::exception& e) {  // bad_alloc, length_error: the map is unchanged (see MapAccumulator::admits)
+    return refuseUpdate(std::string("fusion failed: ") + e.what());
   }
-  last_fusion_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   max_fusion_ms_ = std::max(max_fusion_ms_, last_fusion_ms_);
   if (fusion_ms_.size() < 1000000) fusion_ms_.push_back(last_fusion_ms_);
-  frame_id_ = msg->header.frame_id;
+  if (frame_id_.empty()) {
+    frame_id_ = msg->header.frame_id;  // world_frame "": the first update's frame, from then on
+    NODELET_INFO("the map is in frame '%s' (the first update's)", frame_id_.c_str());
+  }
   last_stamp_ = msg->header.stamp;
   changed_since_publish_ = true;
   if ((ros::WallTime::now() - last_prune_).toSec() > params_.prune_period_s) {
     leaves_pruned_ += map_->prune();
     last_prune_ = ros::WallTime::now();
   }
+}
+
+void OctomapAccumulator::refuseUpdate(const std::string& why) {
+  ++updates_refused_;
+  last_problem_ = "refused an update: " + why;
+  NODELET_WARN_THROTTLE(5.0, "refused an occupancy update (%lu so far): %s",
+                        static_cast<unsigned long>(updates_refused_), why.c_str());
 }
 
 void OctomapAccumulator::publish(const ros::TimerEvent&) {
@@ -197,9 +216,11 @@ bool OctomapAccumulator::saveMap(std_srvs::Trigger::Request&, std_srvs::Trigger:
     response.message = paths[0] + " " + paths[1];
     NODELET_INFO("saved the map: %s", response.message.c_str());
   } catch (const std::exception& e) {
+    ++saves_failed_;
+    last_problem_ = std::string("save failed: ") + e.what();
     response.success = false;
     response.message = e.what();
-    NODELET_ERROR("could not save the map: %s", e.what());
+    NODELET_ERROR("could not save the map (the previous map file stays): %s", e.what());
   }
   return true;
 }
@@ -214,10 +235,16 @@ bool OctomapAccumulator::reset(std_srvs::Empty::Request&, std_srvs::Empty::Respo
 
 void OctomapAccumulator::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   std::lock_guard<std::mutex> lock(mutex_);
-  status.summary(updates_refused_ > 0 ? diagnostic_msgs::DiagnosticStatus::WARN : diagnostic_msgs::DiagnosticStatus::OK,
-                 updates_refused_ > 0 ? last_problem_ : "accumulating");
+  if (saves_failed_ > 0)
+    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, last_problem_);
+  else
+    status.summary(updates_refused_ > 0 ? diagnostic_msgs::DiagnosticStatus::WARN
+                                        : diagnostic_msgs::DiagnosticStatus::OK,
+                   updates_refused_ > 0 ? last_problem_ : "accumulating");
+  status.add("frame", frame_id_);
   status.add("updates received", updates_received_);
   status.add("updates refused", updates_refused_);
+  status.add("saves failed", saves_failed_);
   status.add("leaves", map_->tree().getNumLeafNodes());
   status.add("leaves pruned (max_extent_m)", leaves_pruned_);
   status.add("last fusion time [ms]", last_fusion_ms_);

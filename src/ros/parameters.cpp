@@ -1,6 +1,9 @@
 #include "stereo_occupancy/ros/parameters.h"
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <set>
 
@@ -10,6 +13,13 @@ namespace {
 bool fail(std::string* why, const std::string& text) {
   if (why) *why = text;
   return false;
+}
+/// A name that stays inside its directory: no '/', not "." or "..", no hidden file.
+bool isPlainFileName(const std::string& name) {
+  if (name.empty() || name[0] == '.') return false;
+  for (char c : name)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.')) return false;
+  return true;
 }
 }  // namespace
 
@@ -37,8 +47,8 @@ bool OctomapAccumulatorParameters::isValid(std::string* why) const {
     return fail(why, "publish_rate_hz must be in (0, 100]");
   if (!(std::isfinite(prune_period_s) && prune_period_s > 0.0)) return fail(why, "prune_period_s must be > 0");
   if (!(std::isfinite(save_period_s) && save_period_s >= 0.0)) return fail(why, "save_period_s must be >= 0");
-  if (map_name.empty() || map_name.find('/') != std::string::npos)
-    return fail(why, "map_name must be a file name without '/'");
+  if (!isPlainFileName(map_name))
+    return fail(why, "map_name must be a plain file name: letters, digits, '_', '-', '.', not starting with '.'");
   return map.isValid(why);
 }
 
@@ -75,11 +85,15 @@ bool readParameters(Read&& read, DisparityMapperParameters* p, std::string* why)
 
 template <class Read>
 bool readParameters(Read&& read, OctomapAccumulatorParameters* p, std::string* why) {
+  read("world_frame", p->world_frame);
   read("resolution_m", p->map.resolution_m);
   read("clamping_min_prob", p->map.clamping_min_prob);
   read("clamping_max_prob", p->map.clamping_max_prob);
   read("occupancy_threshold_prob", p->map.occupancy_threshold_prob);
   read("max_extent_m", p->map.max_extent_m);
+  int max_update_cells = static_cast<int>(std::min<uint64_t>(p->map.max_update_cells, INT32_MAX));
+  read("max_update_cells", max_update_cells);
+  p->map.max_update_cells = max_update_cells > 0 ? static_cast<uint64_t>(max_update_cells) : 0;
   read("publish_rate_hz", p->publish_rate_hz);
   read("prune_period_s", p->prune_period_s);
   read("save_dir", p->save_dir);

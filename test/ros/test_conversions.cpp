@@ -92,6 +92,13 @@ TEST(Conversions, CameraFromDisparityImage) {
   msg.f = 700.0f;
   msg.T = -0.3f;
   EXPECT_FALSE(cameraFromDisparityImage(msg, nullptr, params, &cam, &why));
+  // A camera_info whose principal point is 10^12 px away: refused with the reason.
+  msg.T = 0.3f;
+  info.P[2] = 1e12;
+  EXPECT_FALSE(cameraFromDisparityImage(msg, &info, params, &cam, &why));
+  EXPECT_NE(why.find("principal point"), std::string::npos) << why;
+  info.P[2] = -100.0;  // a little outside the image, as rectification may put it: taken
+  EXPECT_TRUE(cameraFromDisparityImage(msg, &info, params, &cam, &why)) << why;
 }
 
 TEST(Conversions, PoseFromTransform) {
@@ -121,9 +128,19 @@ TEST(Parameters, DefaultsAreValidAndBadValuesNameTheParameter) {
   EXPECT_NE(why.find("p_min"), std::string::npos) << why;
   OctomapAccumulatorParameters acc;
   EXPECT_TRUE(acc.isValid(&why)) << why;
-  acc.map_name = "../escape";
+  for (const char* escaping : {"../escape", "..", ".", "", ".hidden", "a b", "map\n"}) {
+    acc.map_name = escaping;
+    EXPECT_FALSE(acc.isValid(&why)) << "'" << escaping << "'";
+    EXPECT_NE(why.find("map_name"), std::string::npos);
+  }
+  for (const char* plain : {"flight_2026-12-01", "map.v2", "M"}) {
+    acc.map_name = plain;
+    EXPECT_TRUE(acc.isValid(&why)) << plain << ": " << why;
+  }
+  acc = OctomapAccumulatorParameters();
+  acc.map.max_update_cells = 0;
   EXPECT_FALSE(acc.isValid(&why));
-  EXPECT_NE(why.find("map_name"), std::string::npos);
+  EXPECT_NE(why.find("max_update_cells"), std::string::npos) << why;
 }
 
 TEST(Parameters, FromNameValuePairs) {

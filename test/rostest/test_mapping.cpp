@@ -27,6 +27,7 @@
 #include "stereo_occupancy/OccupancyUpdate.h"
 #include "stereo_occupancy/ros/conversions.h"
 #include "stereo_occupancy/synthetic_scene.h"
+#include "wait_for.h"
 
 using namespace stereo_occupancy;
 
@@ -87,15 +88,7 @@ class MappingTest : public ::testing::Test {
   }
 
   bool waitFor(const std::function<bool()>& condition, double seconds) {
-    const ros::WallTime until = ros::WallTime::now() + ros::WallDuration(seconds);
-    while (ros::WallTime::now() < until) {
-      {
-        std::lock_guard<std::mutex> lock(mutex_);
-        if (condition()) return true;
-      }
-      ros::WallDuration(0.02).sleep();
-    }
-    return false;
+    return stereo_occupancy::waitFor(mutex_, condition, seconds);
   }
 
   ros::NodeHandle nh_;

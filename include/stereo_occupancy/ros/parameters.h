@@ -34,6 +34,8 @@ struct DisparityMapperParameters {
 
 /// Parameters of the OctomapAccumulator nodelet.
 struct OctomapAccumulatorParameters {
+  /// The map's frame: updates in any other frame are refused; "": the first update's.
+  std::string world_frame = "map";
   MapAccumulatorConfig map;
   double publish_rate_hz = 1.0;  ///< rate of the map outputs, while subscribed [Hz]
   double prune_period_s = 5.0;   ///< how often cells beyond max_extent_m are dropped [s]
