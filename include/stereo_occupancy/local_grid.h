@@ -30,8 +30,12 @@ class LocalGrid {
  public:
   static constexpr float kUnknown = -std::numeric_limits<float>::infinity();
 
-  /// Re-shapes the grid and marks every cell unknown. Keeps its memory.
+  /// Re-shapes the grid and marks every cell unknown. Keeps its memory,
+  /// unless it is much more than the new size needs (releaseIfOversized).
   void reset(const Eigen::Vector3i& origin_index, const Eigen::Vector3i& size, double resolution_m);
+
+  /// Cells the grid's memory holds (at least numCells()).
+  size_t capacityCells() const { return data_.capacity(); }
 
   /// Marks every cell unknown.
   void clear();
@@ -74,6 +78,20 @@ class LocalGrid {
   double resolution_m_ = 1.0;
   std::vector<float> data_;
 };
+
+/// Memory a buffer keeps after a smaller image without condition [elements]
+/// (16 MiB of floats).
+constexpr size_t kKeptBufferElements = size_t{4} << 20;
+/// A buffer asked for less than 1 / kBufferReleaseFactor of what it holds lets it go.
+constexpr size_t kBufferReleaseFactor = 4;
+
+/// Frees @p buffer's memory if it holds much more than the @p needed
+/// elements of this image (one rare huge image must not keep its memory for good).
+template <typename T>
+void releaseIfOversized(std::vector<T>* buffer, size_t needed) {
+  if (buffer->capacity() > kBufferReleaseFactor * needed && buffer->capacity() > kKeptBufferElements)
+    std::vector<T>().swap(*buffer);
+}
 
 /// Cells tested at once by blockHasInformation().
 constexpr int kInformationBlock = 16;

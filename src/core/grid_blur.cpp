@@ -223,6 +223,8 @@ void DistanceDependentBlur::apply(const Eigen::Vector3d& W_camera, LocalGrid* gr
   row_runs_[rows] = static_cast<uint32_t>(runs_.size());
 
   const size_t cells = grid->numCells();
+  releaseIfOversized(&buffer_a_, cells);
+  releaseIfOversized(&buffer_b_, cells);
   buffer_a_.resize(cells);  // holds values only within the extents
   buffer_b_.resize(cells);
   scratch_.resize(nx);

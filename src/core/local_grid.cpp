@@ -11,7 +11,9 @@ void LocalGrid::reset(const Eigen::Vector3i& origin_index, const Eigen::Vector3i
   origin_index_ = origin_index;
   size_ = size.cwiseMax(0);
   resolution_m_ = resolution_m;
-  data_.assign(static_cast<size_t>(size_.x()) * size_.y() * size_.z(), kUnknown);
+  const size_t cells = static_cast<size_t>(size_.x()) * size_.y() * size_.z();
+  releaseIfOversized(&data_, cells);
+  data_.assign(cells, kUnknown);
 }
 
 void LocalGrid::clear() { std::fill(data_.begin(), data_.end(), kUnknown); }

@@ -18,6 +18,11 @@ bool StereoCameraConfig::isValid(std::string* why) const {
   if (!(std::isfinite(focal_length_px) && focal_length_px > 0.0))
     return fail(why, "focal_length_px must be finite and > 0");
   if (!std::isfinite(cx_px) || !std::isfinite(cy_px)) return fail(why, "cx_px/cy_px must be finite");
+  // A rectified principal point may leave the image a little, never by more
+  // than its size: farther means a broken camera_info, not a lens.
+  if (cx_px < -width_px || cx_px > 2.0 * width_px || cy_px < -height_px || cy_px > 2.0 * height_px)
+    return fail(why, "the principal point (" + std::to_string(cx_px) + ", " + std::to_string(cy_px) +
+                         ") px lies more than the image's size outside the image");
   if (!(std::isfinite(baseline_m) && baseline_m > 0.0)) return fail(why, "baseline_m must be finite and > 0");
   if (!(std::isfinite(delta_d_px) && delta_d_px > 0.0)) return fail(why, "delta_d_px must be finite and > 0");
   if (!(std::isfinite(min_range_m) && min_range_m > 0.0)) return fail(why, "min_range_m must be finite and > 0");

@@ -51,6 +51,23 @@ TEST(LocalGrid, ResetMarksUnknown) {
   EXPECT_EQ(grid.originPosition(), Eigen::Vector3d(0.5, 1.0, 1.5));
 }
 
+// Memory is kept between images of similar size, but one rare huge grid
+// (here 64 MiB) does not keep its memory once the grids are small again.
+TEST(LocalGrid, ReleasesTheMemoryOfOneHugeGrid) {
+  LocalGrid grid;
+  grid.reset(Eigen::Vector3i::Zero(), Eigen::Vector3i(256, 256, 256), 0.25);
+  EXPECT_GE(grid.capacityCells(), size_t{256} * 256 * 256);
+  grid.reset(Eigen::Vector3i::Zero(), Eigen::Vector3i(256, 256, 200), 0.25);  // similar: kept
+  EXPECT_GE(grid.capacityCells(), size_t{256} * 256 * 256);
+  grid.reset(Eigen::Vector3i::Zero(), Eigen::Vector3i(100, 100, 60), 0.25);  // much smaller: released
+  EXPECT_LT(grid.capacityCells(), size_t{256} * 256 * 256 / 4);
+  EXPECT_EQ(grid.numCells(), 600000u);
+  EXPECT_EQ(grid.countKnown(), 0u);
+  // Small grids keep their memory whatever the ratio (no allocation per image).
+  grid.reset(Eigen::Vector3i::Zero(), Eigen::Vector3i(10, 10, 10), 0.25);
+  EXPECT_GE(grid.capacityCells(), 600000u);
+}
+
 TEST(FrustumBoundingBox, ContainsTheFrustumAndIsTight) {
   const StereoCameraModel cam{StereoCameraConfig()};
   std::mt19937 rng(9);

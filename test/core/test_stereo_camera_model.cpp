@@ -78,4 +78,17 @@ TEST(StereoCameraModel, ConfigValidation) {
   cfg = paperCamera();
   cfg.delta_d_px = -0.5;
   EXPECT_FALSE(cfg.isValid());
+  // A principal point at most the image's size outside the image.
+  for (double cx : {-cfg.width_px - 1.0, 2.0 * cfg.width_px + 1.0, 1e12}) {
+    cfg = paperCamera();
+    cfg.cx_px = cx;
+    EXPECT_FALSE(cfg.isValid(&why)) << cx;
+    EXPECT_NE(why.find("principal point"), std::string::npos) << why;
+  }
+  cfg = paperCamera();
+  cfg.cy_px = -1e12;
+  EXPECT_FALSE(cfg.isValid());
+  cfg.cy_px = -10.0;
+  cfg.cx_px = cfg.width_px + 10.0;
+  EXPECT_TRUE(cfg.isValid(&why)) << why;
 }
