@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# Builds the libFuzzer target (clang, with AddressSanitizer and
-# UndefinedBehaviorSanitizer) over the core and runs it for SECONDS (default
-# 60). Writes a JUnit file to $RESULTS (if set) so the test command counts it.
-# Crashes land in build/fuzz/.
+# Builds the libFuzzer targets (clang, with AddressSanitizer and
+# UndefinedBehaviorSanitizer) over the core and runs them: the drawer for
+# SECONDS (default 60), the accumulator's update input for half as long.
+# Writes a JUnit file to $RESULTS (if set) so the test command counts it.
+# Crashes land in build/fuzz/; each target's log in build/fuzz/<target>.log.
 #
 # As a test (the default) it is reproducible: a fixed seed (FUZZ_SEED, default
 # 1) from a fresh copy of the seeds in test/fuzz/corpus, so a clean clone runs
@@ -27,26 +28,47 @@ cp -n "$repo"/test/fuzz/corpus/* "$out/$corpus/" 2>/dev/null || true
 
 flags=(-std=c++17 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined
        -I"$repo/include" -isystem /usr/include/eigen3 -isystem /usr/include/opencv4)
-mkdir -p "$out/obj"
-# One object per source, compiled in parallel.
-printf '%s\n' "$repo"/test/fuzz/fuzz_disparity_drawer.cpp "$repo"/src/core/*.cpp |
-  xargs -P "$(nproc)" -I{} sh -c 'clang++ "$@" -c "{}" -o "'"$out"'/obj/$(basename {} .cpp).o"' _ "${flags[@]}"
-clang++ "${flags[@]}" "$out"/obj/*.o -lopencv_core -lopencv_imgproc -lopencv_imgcodecs -loctomap -loctomath \
-  -o "$out/fuzz_disparity_drawer"
+targets=(fuzz_disparity_drawer fuzz_occupancy_update)
+mkdir -p "$out/obj" "$out/core"
+# One object per source, compiled in parallel; the core's objects are shared.
+printf '%s\n' "$repo"/src/core/*.cpp |
+  xargs -P "$(nproc)" -I{} sh -c 'clang++ "$@" -c "{}" -o "'"$out"'/core/$(basename {} .cpp).o"' _ "${flags[@]}"
+for t in "${targets[@]}"; do
+  clang++ "${flags[@]}" -c "$repo/test/fuzz/$t.cpp" -o "$out/obj/$t.o"
+  clang++ "${flags[@]}" "$out/obj/$t.o" "$out"/core/*.o -lopencv_core -lopencv_imgproc -lopencv_imgcodecs \
+    -loctomap -loctomath -o "$out/$t"
+done
 
+# The drawer from the seeds in test/fuzz/corpus for SECONDS; the accumulator's
+# input (occupancy updates from any node) from nothing for half as long.
+# -malloc_limit_mb: one allocation of more than 2 GB is a failure, so an
+# update that claims a huge box and makes the code allocate for it is found.
+run() {  # NAME SECONDS CORPUS
+  ( cd "$out" && ./"$1" -max_total_time="$2" -seed="$seed" -rss_limit_mb=2048 -malloc_limit_mb=2048 -timeout=20 \
+      -print_final_stats=1 "$3" ) >"$out/$1.log" 2>&1
+}
 status=0
-( cd "$out" && ./fuzz_disparity_drawer -max_total_time="$seconds" -seed="$seed" -rss_limit_mb=2048 -timeout=20 \
-    -print_final_stats=1 "$corpus" ) >"$out/fuzz.log" 2>&1 || status=$?
-tail -n 12 "$out/fuzz.log"
+run fuzz_disparity_drawer "$seconds" "$corpus" || status=$?
+tail -n 12 "$out/fuzz_disparity_drawer.log"
+update_corpus="update-$corpus"
+[ "${FUZZ_EXPLORE:-0}" = 1 ] || rm -rf "$out/$update_corpus"
+mkdir -p "$out/$update_corpus"
+update_status=0
+run fuzz_occupancy_update "$(( (seconds + 1) / 2 ))" "$update_corpus" || update_status=$?
+tail -n 12 "$out/fuzz_occupancy_update.log"
 if [ -n "${RESULTS:-}" ]; then
   mkdir -p "$RESULTS"
+  testcase() {  # TARGET SECONDS STATUS
+    echo "  <testcase classname=\"fuzz\" name=\"$1_$2s\">"
+    [ "$3" = 0 ] || echo "    <failure message=\"libFuzzer found a crash; see build/fuzz/$1.log\"/>"
+    echo "  </testcase>"
+  }
   {
     echo '<?xml version="1.0" encoding="UTF-8"?>'
-    echo "<testsuite name=\"fuzz\" tests=\"1\" failures=\"$([ $status = 0 ] && echo 0 || echo 1)\" errors=\"0\">"
-    echo "  <testcase classname=\"fuzz\" name=\"fuzz_disparity_drawer_${seconds}s\">"
-    [ $status = 0 ] || echo "    <failure message=\"libFuzzer found a crash; see build/fuzz/fuzz.log\"/>"
-    echo "  </testcase>"
+    echo "<testsuite name=\"fuzz\" tests=\"2\" failures=\"$(( (status != 0) + (update_status != 0) ))\" errors=\"0\">"
+    testcase fuzz_disparity_drawer "$seconds" "$status"
+    testcase fuzz_occupancy_update "$(( (seconds + 1) / 2 ))" "$update_status"
     echo "</testsuite>"
   } >"$RESULTS/fuzz.xml"
 fi
-exit $status
+[ $status = 0 ] && [ $update_status = 0 ]
