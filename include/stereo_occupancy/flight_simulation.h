@@ -47,7 +47,10 @@ struct FlightScenario {
 /// Names of the built-in scenarios: "posts" (a flight through obstacle posts
 /// with wires between some of them), "houses" (a flight along a street of
 /// houses), "forest" (a low flight down a lane between thin trunks) and
-/// "wires" (power lines of 2 cm wires above the flight, against the sky).
+/// "wires" (power lines of 2 cm wires above the flight, against the sky);
+/// "posts_far" and "forest_far" fly slowly toward the posts' and the forest's
+/// scenes from 40 m to 12 m before their first obstacle, so that they are
+/// seen from 10-40 m away.
 std::vector<std::string> scenarioNames();
 
 /// The named scenario; @throws std::invalid_argument for an unknown name.

@@ -5,8 +5,10 @@
 #include <octomap/OcTree.h>
 
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <unordered_set>
+#include <vector>
 
 #include "stereo_occupancy/flight_simulation.h"
 #include "stereo_occupancy/local_grid.h"
@@ -18,7 +20,20 @@ struct ObservedGroundTruth {
   double resolution_m = 0.0;
   std::unordered_set<uint64_t> surface;  ///< cells holding a surface point seen within range
   std::unordered_set<uint64_t> empty;    ///< cells truly empty on the rays, at least 1.5 cells before the surface
+  std::vector<Eigen::Vector3d> viewpoints;  ///< camera centres of the observed frames [m]
 };
+
+/// The cells a score counts: those whose distance to the nearest viewpoint
+/// (the range at which the flight saw them best) lies in [min_m, max_m).
+struct RangeBand {
+  double min_m = 0.0;
+  double max_m = std::numeric_limits<double>::infinity();
+  /// "0-10 m", "20+ m".
+  std::string name() const;
+};
+
+/// The bands of issue 16: 0-10, 10-20 and 20+ m (the range ends at 25 m).
+std::vector<RangeBand> standardRangeBands();
 
 /// Packs a global cell index (each component within ±2^20) into one key.
 inline uint64_t packCell(const Eigen::Vector3i& g) {
@@ -44,7 +59,10 @@ ObservedGroundTruth observeGroundTruth(const FlightScenario& scenario, double re
 /// Map quality against the truth.
 struct MapQuality {
   size_t occupied_cells = 0;             ///< occupied leaves of the map
-  size_t occupied_at_surface = 0;        ///< ... within one cell of a true surface
+  size_t occupied_at_surface = 0;        ///< ... within one cell of a solid (inside one counts)
+  /// ... farther than one cell from a true surface with the centre in free
+  /// air, outside every solid: phantom obstacles, which close a planner's corridors.
+  size_t occupied_phantom = 0;
   size_t truth_surface_cells = 0;
   size_t surface_found = 0;              ///< truth surface cells with an occupied cell within one cell
   size_t surface_called_free = 0;        ///< truth surface cells the map calls free
@@ -56,7 +74,14 @@ struct MapQuality {
     return truth_surface_cells ? double(surface_called_free) / truth_surface_cells : 0.0;
   }
   double freeCoverage() const { return truth_empty_cells ? double(empty_known_free) / truth_empty_cells : 0.0; }
-  /// One JSON object with the counts and the four ratios.
+  /// Share of the occupied cells that are phantom obstacles.
+  double phantomShare() const { return occupied_cells ? double(occupied_phantom) / occupied_cells : 0.0; }
+  /// Harmonic mean of occupied precision and recall.
+  double f1() const {
+    const double p = occupiedPrecision(), r = occupiedRecall();
+    return p + r > 0.0 ? 2.0 * p * r / (p + r) : 0.0;
+  }
+  /// One JSON object with the counts and the ratios.
   std::string toJson() const;
 };
 
@@ -69,7 +94,9 @@ std::vector<Eigen::Vector3i> frameSurfaceCells(const FlightScenario& scenario, s
 /// known and below zero log-odds.
 size_t countCalledFree(const LocalGrid& grid, const std::vector<Eigen::Vector3i>& cells);
 
-/// Scores @p map (occupied: above its occupancy threshold) against the scene and the observed truth.
-MapQuality evaluateMap(const octomap::OcTree& map, const SyntheticScene& scene, const ObservedGroundTruth& truth);
+/// Scores @p map (occupied: above its occupancy threshold) against the scene
+/// and the observed truth, counting the cells within @p band only.
+MapQuality evaluateMap(const octomap::OcTree& map, const SyntheticScene& scene, const ObservedGroundTruth& truth,
+                       const RangeBand& band = RangeBand());
 
 }  // namespace stereo_occupancy

@@ -147,16 +147,32 @@ FlightScenario wiresScenario() {
   return s;
 }
 
+/// A flight toward the scene of @p near from 40 m before its first obstacle
+/// to 12 m before it, slowly: the obstacles are seen from 10-40 m away, as a
+/// helicopter sees what it plans around, not only in close passes.
+FlightScenario farView(FlightScenario near, const std::string& name, double first_obstacle_x_m) {
+  near.name = name;
+  const double start = first_obstacle_x_m - 40.0, speed_mps = 28.0 / 20.0;  // 28 m in 20 s
+  const double altitude = near.T_W_B.front().translation().z();
+  near.T_W_B = weavingFlight(200, near.frame_rate_hz, speed_mps, 1.5, 0.3, [&](double) { return altitude; });
+  for (auto& T : near.T_W_B) T.translation().x() += start;
+  return near;
+}
+
 }  // namespace
 
-std::vector<std::string> scenarioNames() { return {"posts", "houses", "forest", "wires"}; }
+std::vector<std::string> scenarioNames() {
+  return {"posts", "houses", "forest", "wires", "posts_far", "forest_far"};
+}
 
 FlightScenario makeScenario(const std::string& name) {
   if (name == "posts") return postsScenario();
   if (name == "houses") return housesScenario();
   if (name == "forest") return forestScenario();
   if (name == "wires") return wiresScenario();
-  throw std::invalid_argument("unknown scenario '" + name + "' (posts, houses, forest, wires)");
+  if (name == "posts_far") return farView(postsScenario(), name, 14.8);
+  if (name == "forest_far") return farView(forestScenario(), name, 8.0);
+  throw std::invalid_argument("unknown scenario '" + name + "' (posts, houses, forest, wires, posts_far, forest_far)");
 }
 
 namespace {

@@ -1,6 +1,8 @@
 #include "stereo_occupancy/map_evaluation.h"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 #include "stereo_occupancy/local_grid.h"
@@ -16,6 +18,7 @@ ObservedGroundTruth observeGroundTruth(const FlightScenario& scenario, double re
   const double c = resolution_m;
   for (size_t f = 0; f < scenario.T_W_B.size(); f += static_cast<size_t>(frame_step)) {
     const Eigen::Isometry3d T_W_C = scenario.cameraPose(f);
+    truth.viewpoints.push_back(T_W_C.translation());
     for (int y = surface_pixel_step / 2; y < scenario.camera.height_px; y += surface_pixel_step) {
       for (int x = surface_pixel_step / 2; x < scenario.camera.width_px; x += surface_pixel_step) {
         const Eigen::Vector3d W_dir = T_W_C.linear() * camera.rayThroughPixel(x, y).normalized();
@@ -78,31 +81,55 @@ size_t countCalledFree(const LocalGrid& grid, const std::vector<Eigen::Vector3i>
 std::string MapQuality::toJson() const {
   std::ostringstream out;
   out << "{\"occupied_cells\": " << occupied_cells << ", \"occupied_at_surface\": " << occupied_at_surface
+      << ", \"occupied_phantom\": " << occupied_phantom
       << ", \"truth_surface_cells\": " << truth_surface_cells << ", \"surface_found\": " << surface_found
       << ", \"surface_called_free\": " << surface_called_free << ", \"truth_empty_cells\": " << truth_empty_cells
       << ", \"empty_known_free\": " << empty_known_free << ", \"occupied_precision\": " << occupiedPrecision()
       << ", \"occupied_recall\": " << occupiedRecall() << ", \"surface_called_free_fraction\": "
-      << surfaceCalledFree() << ", \"free_coverage\": " << freeCoverage() << "}";
+      << surfaceCalledFree() << ", \"free_coverage\": " << freeCoverage() << ", \"phantom_share\": "
+      << phantomShare() << ", \"f1\": " << f1() << "}";
   return out.str();
 }
 
-MapQuality evaluateMap(const octomap::OcTree& map, const SyntheticScene& scene, const ObservedGroundTruth& truth) {
+std::string RangeBand::name() const {
+  auto metres = [](double v) { return std::to_string(static_cast<int>(std::lround(v))); };
+  return std::isfinite(max_m) ? metres(min_m) + "-" + metres(max_m) + " m" : metres(min_m) + "+ m";
+}
+
+std::vector<RangeBand> standardRangeBands() {
+  return {{0.0, 10.0}, {10.0, 20.0}, {20.0, std::numeric_limits<double>::infinity()}};
+}
+
+MapQuality evaluateMap(const octomap::OcTree& map, const SyntheticScene& scene, const ObservedGroundTruth& truth,
+                       const RangeBand& band) {
   MapQuality q;
   const double c = map.getResolution();
+  const bool everything = band.min_m <= 0.0 && !std::isfinite(band.max_m);
+  auto inBand = [&](const Eigen::Vector3d& p) {
+    if (everything) return true;
+    double nearest2 = std::numeric_limits<double>::infinity();
+    for (const Eigen::Vector3d& v : truth.viewpoints) nearest2 = std::min(nearest2, (p - v).squaredNorm());
+    return nearest2 >= band.min_m * band.min_m && nearest2 < band.max_m * band.max_m;
+  };
   // Occupied leaves within one cell of a true surface (a leaf may be larger than one cell).
   for (auto it = map.begin_leafs(), end = map.end_leafs(); it != end; ++it) {
     if (!map.isNodeOccupied(*it)) continue;
+    const Eigen::Vector3d centre(it.getX(), it.getY(), it.getZ());
+    if (!inBand(centre)) continue;
     ++q.occupied_cells;
     const double half = 0.5 * it.getSize();
     const double tolerance = std::sqrt(3.0) * half + c;
-    if (scene.distance(Eigen::Vector3d(it.getX(), it.getY(), it.getZ())) <= tolerance) ++q.occupied_at_surface;
+    if (scene.distance(centre) <= tolerance) ++q.occupied_at_surface;
+    else if (!scene.isInside(centre)) ++q.occupied_phantom;
   }
+  auto centreOf = [&](const Eigen::Vector3i& g) { return Eigen::Vector3d((g.cast<double>().array() + 0.5).matrix() * c); };
   auto node = [&](const Eigen::Vector3i& g) {
-    const Eigen::Vector3d p = (g.cast<double>().array() + 0.5).matrix() * c;
+    const Eigen::Vector3d p = centreOf(g);
     return map.search(p.x(), p.y(), p.z());
   };
   for (uint64_t key : truth.surface) {
     const Eigen::Vector3i g = unpackCell(key);
+    if (!inBand(centreOf(g))) continue;
     ++q.truth_surface_cells;
     const octomap::OcTreeNode* own = node(g);
     if (own && !map.isNodeOccupied(own)) ++q.surface_called_free;
@@ -116,6 +143,7 @@ MapQuality evaluateMap(const octomap::OcTree& map, const SyntheticScene& scene, 
     q.surface_found += found;
   }
   for (uint64_t key : truth.empty) {
+    if (!inBand(centreOf(unpackCell(key)))) continue;
     ++q.truth_empty_cells;
     const octomap::OcTreeNode* n = node(unpackCell(key));
     q.empty_known_free += n && !map.isNodeOccupied(n);

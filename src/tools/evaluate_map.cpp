@@ -7,6 +7,7 @@
 #include <iostream>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "stereo_occupancy/map_evaluation.h"
 #include "stereo_occupancy/map_rendering.h"
@@ -18,7 +19,8 @@ namespace tools = stereo_occupancy::tools;
 namespace {
 
 const char* kUsage =
-    "usage: evaluate_map --map FILE.bt|FILE.ot --scenario posts|houses|forest|wires [--max-range M]\n"
+    "usage: evaluate_map --map FILE.bt|FILE.ot --scenario NAME [--max-range M]\n"
+    "  NAME: posts, houses, forest, wires, posts_far, forest_far\n"
     "                    [--frames N (the flight's first N frames were mapped)]\n"
     "                    [--views PREFIX (writes PREFIX_top.png, PREFIX_side.png)]\n";
 
@@ -62,7 +64,14 @@ int run(int argc, char** argv) {
   if (!(map->getResolution() >= 0.01)) throw std::runtime_error("'" + map_path + "' has no usable resolution");
   if (frames > 0 && static_cast<size_t>(frames) < scenario.T_W_B.size()) scenario.T_W_B.resize(frames);
   const so::ObservedGroundTruth truth = so::observeGroundTruth(scenario, map->getResolution(), max_range, 5, 4);
-  std::cout << so::evaluateMap(*map, scenario.scene, truth).toJson() << std::endl;
+  // The whole map, then the same scores per range band (distance to the nearest viewpoint).
+  std::string json = so::evaluateMap(*map, scenario.scene, truth).toJson();
+  json.pop_back();
+  json += ", \"bands\": {";
+  const std::vector<so::RangeBand> bands = so::standardRangeBands();
+  for (size_t b = 0; b < bands.size(); ++b)
+    json += (b ? ", \"" : "\"") + bands[b].name() + "\": " + so::evaluateMap(*map, scenario.scene, truth, bands[b]).toJson();
+  std::cout << json << "}}" << std::endl;
   if (!views_prefix.empty()) {
     cv::Mat top, side;
     so::renderMapViews(*map, 16.0, &top, &side);
