@@ -13,8 +13,27 @@
 
 namespace stereo_occupancy {
 
+/// The shape of one measurement's profile along its ray.
+enum class SensorProfile {
+  /// The paper's eqs. 9-10: a Gaussian of width Δl around l_p, rising from
+  /// p_min in front and falling to 0.5 behind (occupied from about 1.6 Δl in
+  /// front of l_p to tail_sigmas·Δl behind it).
+  kGaussian,
+  /// Occupied only where the cell's window holds l_p (p_hit), no information
+  /// in a gap of free_gap_sigmas·Δl in front of it (where the surface may
+  /// truly be, given the range noise), free (p_free) before the gap, nothing
+  /// behind: a hit makes no slab of phantom obstacles around the surface.
+  kSurface,
+};
+
+/// "gaussian" or "surface".
+const char* toString(SensorProfile profile);
+/// Parses a name given by toString().
+bool parseSensorProfile(const std::string& name, SensorProfile* profile);
+
 /// Parameters of eqs. 9-10 plus the clamp that keeps eq. 9 a probability.
 struct InverseSensorModelConfig {
+  SensorProfile profile = SensorProfile::kGaussian;
   double k_m = 0.1;     ///< k, significance of one measurement [m] (eq. 9)
   double p_min = 0.35;  ///< occupancy probability of free space in front of a measurement (eq. 10)
   /// Cap on the peak probability P(l_p). Eq. 9 peaks at 0.5 + k/(Δl√(2π)),
@@ -22,10 +41,29 @@ struct InverseSensorModelConfig {
   /// camera). The peak amplitude is capped at p_max, so the Gaussian keeps its
   /// shape and P stays in [p_min, p_max] ⊂ (0, 1) for every range.
   double p_max = 0.9;
+  /// How far behind the peak a measurement speaks, in units of Δl: beyond
+  /// l_p + c/2 + tail_sigmas·Δl its cells are left untouched. 3 is the
+  /// paper's Gaussian down to 1 % of its height; 0 keeps only the
+  /// measurement's own cell (nothing behind a surface is ever seen).
+  double tail_sigmas = 3.0;
+  /// kSurface: occupancy probability of the cell that holds the measurement.
+  double p_hit = 0.7;
+  /// kSurface: occupancy probability of the free space before the gap.
+  double p_free = 0.3;
+  /// kSurface: occupancy probability along a ray that measured no range (zero
+  /// disparity: sky, or beyond the range), at least p_free; 0.5 says nothing.
+  /// Such a ray misses what is too thin to resolve, but weaker sky evidence
+  /// (0.45) left more noise behind thin objects than it saved wires from
+  /// being called free (docs/quality.md), so it defaults to p_free.
+  double p_sky = 0.3;
+  /// kSurface: the gap in front of l_p without information, in units of Δl.
+  double free_gap_sigmas = 1.0;
 
   bool isValid(std::string* why = nullptr) const;
   bool operator==(const InverseSensorModelConfig& o) const {
-    return k_m == o.k_m && p_min == o.p_min && p_max == o.p_max;
+    return profile == o.profile && k_m == o.k_m && p_min == o.p_min && p_max == o.p_max &&
+           tail_sigmas == o.tail_sigmas && p_hit == o.p_hit && p_free == o.p_free && p_sky == o.p_sky &&
+           free_gap_sigmas == o.free_gap_sigmas;
   }
 };
 
@@ -59,8 +97,11 @@ class InverseSensorModel {
   double logOddsHatSampled(double l_m, double l_p_m, double delta_l_m, double cell_size_m,
                            int samples = 10001) const;
 
-  /// Log-odds of free space, ln(p_min / (1 - p_min)).
-  double freeLogOdds() const { return std::log(config_.p_min / (1.0 - config_.p_min)); }
+  /// Log-odds of free space, ln(p / (1 - p)) of p_min (p_free for kSurface).
+  double freeLogOdds() const {
+    const double p = config_.profile == SensorProfile::kSurface ? config_.p_free : config_.p_min;
+    return std::log(p / (1.0 - p));
+  }
 
  private:
   InverseSensorModelConfig config_;
@@ -114,13 +155,16 @@ struct RangeProfile {
 /// in A from 0.5 to p_max, each sampling L from e = -kFrontSigmas·Δl to
 /// +kTailSigmas·Δl with kSamplesPerSigma samples per Δl; look-ups interpolate
 /// bilinearly. Beyond the front the value is the free-space log-odds; beyond
-/// the tail (P - 0.5 < 1.1 % of the peak height) cells are left untouched.
+/// the tail (the model's tail_sigmas, at most kTailSigmas, where P - 0.5 <
+/// 1.1 % of the peak height) cells are left untouched.
 class LogOddsTable {
  public:
   static constexpr float kFrontSigmas = 4.0f;
   static constexpr float kTailSigmas = 3.0f;
   static constexpr int kSamplesPerSigma = 32;
   static constexpr int kPeakRows = 41;
+  /// Δl below this is taken as this [m] (eq. 7 gives 6e-4 m at 0.5 m range).
+  static constexpr float kMinDeltaL = 1e-6f;
 
   LogOddsTable(const InverseSensorModel& model, double cell_size_m);
 
@@ -132,18 +176,20 @@ class LogOddsTable {
 
   /// profile(l_p, Δl).tail_m without the rest of the profile: beyond l_p
   /// plus this a measurement says nothing [m].
-  float tailOf(float delta_l_m) const { return static_cast<float>(0.5 * cell_size_m_) + kTailSigmas * delta_l_m; }
+  float tailOf(float delta_l_m) const { return static_cast<float>(0.5 * cell_size_m_) + tail_sigmas_ * delta_l_m; }
 
   double cellSize() const { return cell_size_m_; }
   float freeLogOdds() const { return free_log_odds_; }
 
  private:
   double cell_size_m_;
+  float tail_sigmas_;  ///< InverseSensorModelConfig::tail_sigmas, at most kTailSigmas
   float k_over_sqrt_2pi_;
   float peak_max_;        ///< p_max - 0.5
   float rows_per_peak_;   ///< (kPeakRows - 1) / (p_max - 0.5)
   int row_length_;
   float free_log_odds_;
+  float sky_log_odds_;  ///< of freeProfile(): a ray that measured no range
   std::vector<float> values_;
 };
 

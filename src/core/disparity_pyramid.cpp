@@ -155,12 +155,18 @@ DisparityBlockBound::DisparityBlockBound(const StereoCameraModel& camera, const 
     : far_disparity_(static_cast<float>(camera.farDisparity())), bins_per_px_(8.0f) {
   const double bf = camera.bf();
   // For a line at depth z_far: the largest offset u in front of it where its
-  // profile is still occupied (eq. 11 is unimodal: bisection), as a disparity.
+  // profile does not yet call a cell free (eq. 11 is unimodal: bisection), as
+  // a disparity. For the Gaussian profile that is where it is occupied; the
+  // surface profile's gap (no information) counts too.
   auto maxNear = [&](double d_min) {
     if (!(d_min > 0.0)) return 0.0;  // sky: free all the way
     const double z_far = bf / d_min;
     const double delta_l = camera.depthUncertainty(z_far);
-    auto occupied = [&](double u) { return model.logOddsHat(z_far - u, z_far, delta_l, cell_size_m) > 0.0; };
+    const bool surface = model.config().profile == SensorProfile::kSurface;
+    auto occupied = [&](double u) {
+      const double L = model.logOddsHat(z_far - u, z_far, delta_l, cell_size_m);
+      return surface ? L >= 0.0 : L > 0.0;
+    };
     double lo = 0.0, hi = z_far;
     if (occupied(hi)) return std::numeric_limits<double>::infinity();
     for (int it = 0; it < 40; ++it) {

@@ -11,6 +11,15 @@ namespace {
 constexpr double kSqrt2Pi = 2.5066282746310002;
 }
 
+const char* toString(SensorProfile profile) { return profile == SensorProfile::kSurface ? "surface" : "gaussian"; }
+
+bool parseSensorProfile(const std::string& name, SensorProfile* profile) {
+  if (name == "gaussian") *profile = SensorProfile::kGaussian;
+  else if (name == "surface") *profile = SensorProfile::kSurface;
+  else return false;
+  return true;
+}
+
 bool InverseSensorModelConfig::isValid(std::string* why) const {
   auto fail = [why](const char* text) {
     if (why) *why = text;
@@ -19,6 +28,12 @@ bool InverseSensorModelConfig::isValid(std::string* why) const {
   if (!(std::isfinite(k_m) && k_m > 0.0)) return fail("k_m must be finite and > 0");
   if (!(p_min > 0.0 && p_min < 0.5)) return fail("p_min must be in (0, 0.5)");
   if (!(p_max > 0.5 && p_max < 1.0)) return fail("p_max must be in (0.5, 1)");
+  if (!(tail_sigmas >= 0.0 && tail_sigmas <= LogOddsTable::kTailSigmas)) return fail("tail_sigmas must be in [0, 3]");
+  if (!(p_hit > 0.5 && p_hit < 1.0)) return fail("p_hit must be in (0.5, 1)");
+  if (!(p_free > 0.0 && p_free < 0.5)) return fail("p_free must be in (0, 0.5)");
+  if (!(p_sky >= p_free && p_sky <= 0.5)) return fail("p_sky must be in [p_free, 0.5]");
+  if (!(free_gap_sigmas >= 0.0 && free_gap_sigmas <= LogOddsTable::kFrontSigmas))
+    return fail("free_gap_sigmas must be in [0, 4]");
   return true;
 }
 
@@ -29,6 +44,13 @@ double InverseSensorModel::peakProbability(double delta_l_m) const {
 double InverseSensorModel::probability(double l_m, double l_p_m, double delta_l_m) const {
   const double p_occ = occupancyPrior(l_m, l_p_m);  // eq. 10
   const double s = (l_m - l_p_m) / delta_l_m;
+  if (config_.profile == SensorProfile::kSurface) {
+    if (s == 0.0) return config_.p_hit;
+    return s < -config_.free_gap_sigmas ? config_.p_free : 0.5;
+  }
+  // Beyond a shortened tail: no information (the paper's tail, kTailSigmas,
+  // is where the table ends; the exact model goes on).
+  if (config_.tail_sigmas < LogOddsTable::kTailSigmas && s > config_.tail_sigmas) return 0.5;
   // Eq. 9, with the amplitude k/(Δl√2π) + 0.5 capped at p_max.
   return p_occ + (peakProbability(delta_l_m) - p_occ) * std::exp(-0.5 * s * s);
 }
@@ -54,7 +76,11 @@ double InverseSensorModel::logOddsHatSampled(double l_m, double l_p_m, double de
   return best;
 }
 
-LogOddsTable::LogOddsTable(const InverseSensorModel& model, double cell_size_m) : cell_size_m_(cell_size_m) {
+LogOddsTable::LogOddsTable(const InverseSensorModel& model, double cell_size_m)
+    : cell_size_m_(cell_size_m),
+      tail_sigmas_(model.config().profile == SensorProfile::kSurface
+                       ? 1.0f / kSamplesPerSigma  // the measurement's own cell only
+                       : static_cast<float>(model.config().tail_sigmas)) {
   const auto& cfg = model.config();
   k_over_sqrt_2pi_ = static_cast<float>(cfg.k_m / kSqrt2Pi);
   peak_max_ = static_cast<float>(cfg.p_max - 0.5);
@@ -62,6 +88,8 @@ LogOddsTable::LogOddsTable(const InverseSensorModel& model, double cell_size_m) 
   const int samples = static_cast<int>((kFrontSigmas + kTailSigmas) * kSamplesPerSigma);
   row_length_ = samples + 2;  // one sample of padding for the interpolation at the tail
   free_log_odds_ = static_cast<float>(model.freeLogOdds());
+  sky_log_odds_ = cfg.profile == SensorProfile::kSurface ? static_cast<float>(std::log(cfg.p_sky / (1.0 - cfg.p_sky)))
+                                                         : free_log_odds_;
   // One extra row so that the row above the last one exists for the interpolation.
   values_.resize(static_cast<size_t>(kPeakRows + 1) * row_length_);
   for (int r = 0; r <= kPeakRows; ++r) {
@@ -69,6 +97,12 @@ LogOddsTable::LogOddsTable(const InverseSensorModel& model, double cell_size_m) 
     float* row = &values_[static_cast<size_t>(r) * row_length_];
     for (int j = 0; j < row_length_; ++j) {
       const double t = -kFrontSigmas + static_cast<double>(j) / kSamplesPerSigma;  // e / Δl
+      if (cfg.profile == SensorProfile::kSurface) {
+        const int peak_sample = static_cast<int>(kFrontSigmas) * kSamplesPerSigma;
+        const double p = j == peak_sample ? cfg.p_hit : (t < -cfg.free_gap_sigmas ? cfg.p_free : 0.5);
+        row[j] = static_cast<float>(std::log(p / (1.0 - p)));
+        continue;
+      }
       const double p_occ = t <= 0.0 ? cfg.p_min : 0.5;                             // eq. 10
       const double p = p_occ + (peak - p_occ) * std::exp(-0.5 * t * t);           // eq. 9
       row[j] = static_cast<float>(std::log(p / (1.0 - p)));                        // eq. 8
@@ -77,6 +111,9 @@ LogOddsTable::LogOddsTable(const InverseSensorModel& model, double cell_size_m) 
 }
 
 RangeProfile LogOddsTable::profile(float l_p_m, float delta_l_m) const {
+  // A disparity near the matcher's largest at a very short range gives a Δl
+  // that float rounds to 0; the table's samples per metre must stay finite.
+  delta_l_m = std::max(delta_l_m, kMinDeltaL);
   RangeProfile p;
   // Height of the peak above 0.5 (eq. 9), capped at p_max - 0.5.
   const float inv_delta_l = 1.0f / delta_l_m;
@@ -99,6 +136,7 @@ RangeProfile LogOddsTable::profile(float l_p_m, float delta_l_m) const {
 RangeProfile LogOddsTable::freeProfile() const {
   RangeProfile p = profile(std::numeric_limits<float>::infinity(), 1.0f);
   p.tail_m = 0.0f;
+  p.free_log_odds = sky_log_odds_;
   return p;
 }
 

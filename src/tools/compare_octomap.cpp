@@ -10,6 +10,7 @@
 #include <chrono>
 #include <iomanip>
 #include <iostream>
+#include <map>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -43,9 +44,14 @@ std::string num(double v, int digits = 2) {
 
 
 const char* kUsage =
-    "usage: compare_octomap [--scenario posts|houses|forest|wires] [--frame-step N] [--seed N]\n"
+    "usage: compare_octomap [--scenario NAME] [--frame-step N] [--seed N]\n"
     "                       [--resolution M [--resolution M ...]] [--truth-pixel-step N]\n"
-    "--truth-pixel-step: true surface cells from every N-th pixel (default 4; 1 finds wires)\n";
+    "                       [--algorithm NAME [--algorithm NAME ...]] [--no-octomap]\n"
+    "NAME: posts, houses, forest, wires, posts_far, forest_far\n"
+    "--truth-pixel-step: true surface cells from every N-th pixel (default 4; 1 finds wires)\n"
+    "--algorithm: only these drawing algorithms (default all six); --no-octomap: leave OctoMap out\n"
+    "--model NAME=VALUE: k_m, p_min, p_max, tail_sigmas, surface (1: the surface profile), p_hit, p_free, p_sky,\n"
+    "  free_gap_sigmas, delta_d_px of the drawing (repeatable)\n";
 
 int run(int argc, char** argv) {
   std::string scenario_name = "posts";
@@ -54,6 +60,9 @@ int run(int argc, char** argv) {
   std::vector<double> resolutions = {1.0, 0.5, 0.25};
   bool resolution_given = false;
   int truth_pixel_step = 4;
+  std::vector<so::DrawingAlgorithm> algorithms;
+  std::map<std::string, double> model_values;
+  bool with_octomap = true;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help") {
@@ -67,6 +76,19 @@ int run(int argc, char** argv) {
       seed = static_cast<uint32_t>(tools::parseWhole(a, tools::nextValue(argc, argv, &i), 0, 4294967295L));
     } else if (a == "--truth-pixel-step") {
       truth_pixel_step = static_cast<int>(tools::parseWhole(a, tools::nextValue(argc, argv, &i), 1, 64));
+    } else if (a == "--algorithm") {  // repeatable
+      so::DrawingAlgorithm algorithm;
+      const std::string name = tools::nextValue(argc, argv, &i);
+      if (!so::parseDrawingAlgorithm(name, &algorithm))
+        throw tools::UsageError("--algorithm must be one of " + so::drawingAlgorithmNames());
+      algorithms.push_back(algorithm);
+    } else if (a == "--model") {  // name=value of the sensor model, repeatable
+      const std::string kv = tools::nextValue(argc, argv, &i);
+      const size_t eq = kv.find('=');
+      if (eq == std::string::npos) throw tools::UsageError("--model takes NAME=VALUE");
+      model_values[kv.substr(0, eq)] = tools::parseNumber(a, kv.substr(eq + 1));
+    } else if (a == "--no-octomap") {
+      with_octomap = false;
     } else if (a == "--resolution") {  // repeatable
       if (!resolution_given) resolutions.clear();
       resolution_given = true;
@@ -77,6 +99,7 @@ int run(int argc, char** argv) {
       throw tools::UsageError("unknown option '" + a + "'");
     }
   }
+  if (algorithms.empty()) algorithms = so::allDrawingAlgorithms();
   so::FlightScenario scenario = tools::scenarioNamed(scenario_name);
   // Only every frame_step-th frame is mapped (OctoMap takes seconds a frame).
   std::vector<Eigen::Isometry3d> poses;
@@ -94,7 +117,8 @@ int run(int argc, char** argv) {
   std::cout << "Scenario '" << scenario_name << "' (seed " << seed << "): " << images.size()
             << " frames (every " << frame_step << "th of " << scenario.T_W_B.size()
             << "), 640x480, 25 m range. One thread. Time per frame, median over the frames.\n"
-            << "Ours: draw (incl. pyramid) + encode, then fusion into the OcTree (MapAccumulator). OctoMap: "
+            << "Ours: draw (incl. pyramid) + encode, then fusion into the OcTree (MapAccumulator), with the paper's "
+               "Gaussian profile (eqs. 9-10) unless named \"surface\" (the mapper's default). OctoMap: "
                "insertPointCloud of the valid pixels' points (zero disparity has no point), max range 25 m.\n"
             << "Quality within one cell against the ground truth of the mapped frames (surface cells from "
             << (truth_pixel_step == 1 ? std::string("every pixel") : "every " + std::to_string(truth_pixel_step) + "th pixel")
@@ -102,8 +126,13 @@ int run(int argc, char** argv) {
             << "\"frame: surface called free\" counts, over the frames, the cells of each frame's own true "
                "surfaces (every pixel) that the frame's local grid calls free: the drawing alone, before fusion.\n\n"
             << "| cell | method | draw ms | fusion ms | total ms | occupied precision % | occupied recall % | "
-               "surface called free % | free coverage % | frame: surface called free % |\n"
-               "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+               "F1 | phantom % | surface called free % | free coverage % | frame: surface called free % |\n"
+               "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+  // Per range band (distance to the nearest viewpoint), printed after the main table.
+  std::ostringstream bands;
+  bands << "\nBy range band (a cell's distance to the nearest viewpoint of the mapped frames):\n\n"
+        << "| cell | method | band | F1 | occupied precision % | occupied recall % | phantom % | "
+           "surface called free % | occupied cells |\n|---|---|---|---:|---:|---:|---:|---:|---:|\n";
 
   for (double res : resolutions) {
     const so::ObservedGroundTruth truth = so::observeGroundTruth(truth_flight, res, max_range, 1, 4, truth_pixel_step);
@@ -125,14 +154,45 @@ int run(int argc, char** argv) {
       const so::MapQuality q = so::evaluateMap(tree, scenario.scene, truth);
       std::cout << "| " << res << " m | " << name << " | " << num(median(draw), 3) << " | " << num(median(fuse), 3)
                 << " | " << num(median(total), 3) << " | " << pct(q.occupiedPrecision()) << " | "
-                << pct(q.occupiedRecall()) << " | " << pct(q.surfaceCalledFree()) << " | " << pct(q.freeCoverage())
-                << " | " << frame_called_free << " |" << std::endl;
+                << pct(q.occupiedRecall()) << " | " << num(q.f1(), 3) << " | " << pct(q.phantomShare()) << " | "
+                << pct(q.surfaceCalledFree()) << " | " << pct(q.freeCoverage()) << " | " << frame_called_free << " |"
+                << std::endl;
+      for (const so::RangeBand& band : so::standardRangeBands()) {
+        const so::MapQuality b = so::evaluateMap(tree, scenario.scene, truth, band);
+        bands << "| " << res << " m | " << name << " | " << band.name() << " | " << num(b.f1(), 3) << " | "
+              << pct(b.occupiedPrecision()) << " | " << pct(b.occupiedRecall()) << " | " << pct(b.phantomShare())
+              << " | " << pct(b.surfaceCalledFree()) << " | " << b.occupied_cells << " |\n";
+      }
     };
-    for (so::DrawingAlgorithm algorithm : so::allDrawingAlgorithms()) {
+    // Each algorithm with the paper's profile, and the mapper's default
+    // (line_pyramid_bounded with the surface profile) when it is asked for.
+    std::vector<std::pair<so::DrawingAlgorithm, so::SensorProfile>> methods;
+    for (so::DrawingAlgorithm algorithm : algorithms) {
+      methods.emplace_back(algorithm, so::SensorProfile::kGaussian);
+      if (algorithm == so::DrawingAlgorithm::kLinePyramidBounded)
+        methods.emplace_back(algorithm, so::SensorProfile::kSurface);
+    }
+    for (const auto& [algorithm, profile] : methods) {
       so::DrawingConfig config;
       config.algorithm = algorithm;
       config.resolution_m = res;
-      so::DisparityDrawer drawer(scenario.camera, config);
+      config.sensor_model.profile = profile;
+      so::StereoCameraConfig camera_config = scenario.camera;
+      for (const auto& [name, value] : model_values) {
+        if (name == "k_m") config.sensor_model.k_m = value;
+        else if (name == "p_min") config.sensor_model.p_min = value;
+        else if (name == "p_max") config.sensor_model.p_max = value;
+        else if (name == "tail_sigmas") config.sensor_model.tail_sigmas = value;
+        else if (name == "surface") config.sensor_model.profile = value != 0.0 ? so::SensorProfile::kSurface
+                                                                                : so::SensorProfile::kGaussian;
+        else if (name == "p_hit") config.sensor_model.p_hit = value;
+        else if (name == "p_free") config.sensor_model.p_free = value;
+        else if (name == "p_sky") config.sensor_model.p_sky = value;
+        else if (name == "free_gap_sigmas") config.sensor_model.free_gap_sigmas = value;
+        else if (name == "delta_d_px") camera_config.delta_d_px = value;
+        else throw tools::UsageError("--model: unknown name '" + name + "'");
+      }
+      so::DisparityDrawer drawer(camera_config, config);
       so::MapAccumulatorConfig map_config;
       map_config.resolution_m = res;
       so::MapAccumulator map(map_config);
@@ -151,10 +211,13 @@ int run(int argc, char** argv) {
         fuse.push_back(ms(t1, t2));
         called_free += so::countCalledFree(grid, frame_surfaces[i]);
       }
-      report(so::toString(algorithm), draw, fuse, map.tree(),
+      const std::string name = std::string(so::toString(algorithm)) +
+                               (config.sensor_model.profile == so::SensorProfile::kSurface ? ", surface" : "");
+      report(name, draw, fuse, map.tree(),
              pct(frame_surface_cells ? static_cast<double>(called_free) / frame_surface_cells : 0.0));
     }
     for (bool discretize : {false, true}) {
+      if (!with_octomap) break;
       octomap::OcTree tree(res);
       std::vector<double> draw, fuse;
       for (size_t i = 0; i < images.size(); ++i) {
@@ -180,6 +243,7 @@ int run(int argc, char** argv) {
              "-");  // no grid of its own per frame
     }
   }
+  std::cout << bands.str();
   return 0;
 }
 

@@ -1,0 +1,192 @@
+// The surface profile (beyond the paper): occupied only at the measured
+// surface, a gap of no information before it, free before the gap, nothing
+// behind. The exact model, its table, the bound it gives the bounded
+// pyramid, and what it draws.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "stereo_occupancy/disparity_drawer.h"
+#include "stereo_occupancy/synthetic_scene.h"
+
+using namespace stereo_occupancy;
+
+namespace {
+
+constexpr double kCell = 0.25;
+
+double logit(double p) { return std::log(p / (1.0 - p)); }
+
+InverseSensorModelConfig surfaceConfig() {
+  InverseSensorModelConfig c;
+  c.profile = SensorProfile::kSurface;
+  return c;
+}
+
+DrawingConfig surfaceDrawing(DrawingAlgorithm algorithm) {
+  DrawingConfig d;
+  d.algorithm = algorithm;
+  d.resolution_m = kCell;
+  d.sensor_model = surfaceConfig();
+  return d;
+}
+
+/// Camera 2 m above ground level looking along +x.
+Eigen::Isometry3d camera() { return lookingAlongX(Eigen::Vector3d(0.0, 0.0, 2.0)); }
+
+float valueAt(const LocalGrid& grid, const Eigen::Vector3d& W_point) {
+  const Eigen::Vector3i local = LocalGrid::globalIndex(W_point, kCell) - grid.originIndex();
+  return grid.contains(local) ? grid.at(local.x(), local.y(), local.z()) : LocalGrid::kUnknown;
+}
+
+}  // namespace
+
+TEST(SurfaceProfile, NamesAndValidation) {
+  SensorProfile p;
+  ASSERT_TRUE(parseSensorProfile("surface", &p));
+  EXPECT_EQ(p, SensorProfile::kSurface);
+  ASSERT_TRUE(parseSensorProfile("gaussian", &p));
+  EXPECT_EQ(p, SensorProfile::kGaussian);
+  EXPECT_FALSE(parseSensorProfile("bresenham", &p));
+  EXPECT_STREQ(toString(SensorProfile::kSurface), "surface");
+  InverseSensorModelConfig c = surfaceConfig();
+  EXPECT_TRUE(c.isValid());
+  c.p_hit = 0.5;
+  EXPECT_FALSE(c.isValid());
+  c = surfaceConfig();
+  c.p_free = 0.5;
+  EXPECT_FALSE(c.isValid());
+  c = surfaceConfig();
+  c.p_sky = 0.2;  // stronger than p_free: refused
+  EXPECT_FALSE(c.isValid());
+  c = surfaceConfig();
+  c.free_gap_sigmas = 4.5;
+  EXPECT_FALSE(c.isValid());
+  EXPECT_FALSE(InverseSensorModelConfig() == surfaceConfig());
+}
+
+// The exact model: p_hit where the cell's window holds l_p, 0.5 (log-odds 0)
+// in the gap and behind, p_free before the gap; the table serves the same.
+TEST(SurfaceProfile, ExactModelAndTableAgree) {
+  const InverseSensorModel model(surfaceConfig());
+  const LogOddsTable table(model, kCell);
+  const double l_p = 15.0, dl = 0.6;
+  EXPECT_NEAR(model.logOddsHat(l_p, l_p, dl, kCell), logit(0.7), 1e-12);
+  EXPECT_NEAR(model.logOddsHat(l_p - 0.12, l_p, dl, kCell), logit(0.7), 1e-12);   // the window holds l_p
+  EXPECT_NEAR(model.logOddsHat(l_p + 0.12, l_p, dl, kCell), logit(0.7), 1e-12);
+  EXPECT_EQ(model.logOddsHat(l_p - 0.125 - 0.3, l_p, dl, kCell), 0.0);             // in the gap (0.6 m)
+  EXPECT_NEAR(model.logOddsHat(l_p - 0.125 - 0.61, l_p, dl, kCell), logit(0.3), 1e-12);  // before it
+  EXPECT_EQ(model.logOddsHat(l_p + 0.2, l_p, dl, kCell), 0.0);                     // behind: nothing
+  const RangeProfile profile = table.profile(static_cast<float>(l_p), static_cast<float>(dl));
+  EXPECT_NEAR(profile.endRange(), l_p + 0.125 + dl / LogOddsTable::kSamplesPerSigma, 1e-5);
+  for (double l = l_p - 3.5; l <= profile.endRange(); l += 0.013) {
+    const double e = l < l_p - 0.125 ? l - l_p + 0.125 : (l > l_p + 0.125 ? l - l_p - 0.125 : 0.0);
+    if (std::abs(std::abs(e) - 0.0) < dl / 32.0 && e != 0.0) continue;  // within one table sample of the edge
+    if (std::abs(e + dl) < dl / 32.0) continue;                          // ... of the gap's start
+    EXPECT_NEAR(profile.at(static_cast<float>(l)), model.logOddsHat(l, l_p, dl, kCell), 1e-4) << l;
+  }
+  // A ray without a range (zero disparity): p_sky, by default p_free.
+  EXPECT_NEAR(table.freeProfile().at(10.0f), logit(0.3), 1e-6);
+  InverseSensorModelConfig weak_sky = surfaceConfig();
+  weak_sky.p_sky = 0.45;
+  EXPECT_NEAR(LogOddsTable(InverseSensorModel(weak_sky), kCell).freeProfile().at(10.0f), logit(0.45), 1e-6);
+  // The paper's profile keeps its free value for the sky.
+  const LogOddsTable paper(InverseSensorModel(InverseSensorModelConfig()), kCell);
+  EXPECT_NEAR(paper.freeProfile().at(10.0f), logit(0.35), 1e-6);
+}
+
+// The bounded pyramid's bound: a nearer pixel must lie where the far line
+// does not call it free, that is within c/2 + the gap.
+TEST(SurfaceProfile, BoundReachesOverTheGap) {
+  const StereoCameraModel cam{StereoCameraConfig()};
+  const InverseSensorModel model(surfaceConfig());
+  const DisparityBlockBound bound(cam, model, kCell);
+  const auto d = [&](double z) { return static_cast<float>(cam.disparityFromDepth(z)); };
+  for (double z_far : {5.0, 12.0, 20.0}) {
+    SCOPED_TRACE(z_far);
+    const double reach = 0.5 * kCell + cam.depthUncertainty(z_far);  // free_gap_sigmas = 1
+    EXPECT_TRUE(bound.isFaithful(d(z_far), d(z_far - 0.97 * reach)));
+    EXPECT_FALSE(bound.isFaithful(d(z_far), d(z_far - 1.03 * reach)));
+  }
+  EXPECT_FALSE(bound.isFaithful(d(20.0), d(8.0)));  // a post before a wall
+  EXPECT_FALSE(bound.isFaithful(0.0f, d(10.0)));    // a wire against the sky
+}
+
+// A wall at 12 m: the surface profile leaves everything behind it untouched
+// (the paper's draws a tail of occupied cells into it), and calls no cell
+// in front of it occupied beyond one cell.
+TEST(SurfaceProfile, NothingBehindTheSurfaceAndNoSlabBeforeIt) {
+  SyntheticScene scene;
+  scene.addBox({12.0, -20.0, -5.0}, {14.0, 20.0, 10.0});
+  const cv::Mat disparity = renderDisparity(scene, StereoCameraModel(StereoCameraConfig()), camera());
+  auto draw = [&](const DrawingConfig& config) {
+    DisparityDrawer drawer(StereoCameraConfig(), config);
+    LocalGrid grid;
+    drawer.draw(disparity, camera(), &grid);
+    return grid;
+  };
+  DrawingConfig paper_config = surfaceDrawing(DrawingAlgorithm::kLinePyramidBounded);
+  paper_config.sensor_model = InverseSensorModelConfig();
+  const LocalGrid surface = draw(surfaceDrawing(DrawingAlgorithm::kLinePyramidBounded));
+  const LocalGrid paper = draw(paper_config);
+  int surface_behind = 0, paper_behind = 0, surface_front = 0, at_wall = 0, wall_cells = 0;
+  for (double y = -2.0; y < 2.0; y += kCell)
+    for (double z = 1.0; z < 3.0; z += kCell) {
+      for (double x = 12.6; x < 14.0; x += kCell) {  // more than one cell behind the wall's face
+        surface_behind += valueAt(surface, {x, y, z}) != LocalGrid::kUnknown && valueAt(surface, {x, y, z}) != 0.0f;
+        paper_behind += valueAt(paper, {x, y, z}) > 0.0f;
+      }
+      for (double x = 2.0; x < 11.7; x += kCell) surface_front += valueAt(surface, {x, y, z}) > 0.0f;
+      ++wall_cells;
+      at_wall += valueAt(surface, {12.1, y, z}) > 0.0f || valueAt(surface, {11.9, y, z}) > 0.0f;
+    }
+  EXPECT_EQ(surface_behind, 0);
+  EXPECT_GT(paper_behind, 100);  // the tail of eq. 9 reaches 3 Δl (1 m at 12 m) into the wall
+  EXPECT_EQ(surface_front, 0);
+  EXPECT_EQ(at_wall, wall_cells);
+}
+
+// The thin obstacles of the bounded-pyramid tests: with the surface profile
+// the bounded pyramid still keeps the post before the wall and the wire
+// against the sky, none of their cells called free.
+TEST(SurfaceProfile, BoundedPyramidKeepsThinObstacles) {
+  struct Case {
+    const char* what;
+    SyntheticScene scene;
+    Eigen::Vector3d lo, hi;
+  };
+  std::vector<Case> cases(2);
+  cases[0].what = "post before a wall";
+  cases[0].scene.addBox({20.0, -15.0, -5.0}, {21.0, 15.0, 10.0});
+  cases[0].scene.addBox({8.1 - 0.025, 0.37 - 0.025, -1.0}, {8.1 + 0.025, 0.37 + 0.025, 5.0});
+  cases[0].lo = {8.1, 0.37, 1.0};
+  cases[0].hi = {8.1, 0.37, 2.99};
+  cases[1].what = "wire against the sky";
+  cases[1].scene.addBox({10.1 - 0.01, -4.0, 3.1 - 0.01}, {10.1 + 0.01, 4.0, 3.1 + 0.01});
+  cases[1].lo = {10.1, -3.5, 3.1};
+  cases[1].hi = {10.1, 3.49, 3.1};
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.what);
+    const cv::Mat disparity = renderDisparity(c.scene, StereoCameraModel(StereoCameraConfig()), camera());
+    DisparityDrawer drawer(StereoCameraConfig(), surfaceDrawing(DrawingAlgorithm::kLinePyramidBounded));
+    LocalGrid grid;
+    drawer.draw(disparity, camera(), &grid);
+    const Eigen::Vector3i lo = LocalGrid::globalIndex(c.lo, kCell), hi = LocalGrid::globalIndex(c.hi, kCell);
+    int cells = 0, occupied = 0, free = 0;
+    for (int z = lo.z(); z <= hi.z(); ++z)
+      for (int y = lo.y(); y <= hi.y(); ++y)
+        for (int x = lo.x(); x <= hi.x(); ++x) {
+          const Eigen::Vector3i local = Eigen::Vector3i(x, y, z) - grid.originIndex();
+          ASSERT_TRUE(grid.contains(local));
+          const float v = grid.at(local.x(), local.y(), local.z());
+          ++cells;
+          occupied += v > 0.0f;
+          free += v < 0.0f && v != LocalGrid::kUnknown;
+        }
+    EXPECT_GT(cells, 7);
+    EXPECT_EQ(occupied, cells);
+    EXPECT_EQ(free, 0);
+  }
+}
