@@ -130,10 +130,15 @@ class HostileTest : public ::testing::Test {
     std::lock_guard<std::mutex> lock(mutex_);
     return diag_[status][key];
   }
+  /// Requires mutex_ (inside waitFor's condition), or use mappedNow().
   bool mapped(const ros::Time& stamp) {
     for (const auto& s : mapped_stamps_)
       if (s == stamp) return true;
     return false;
+  }
+  bool mappedNow(const ros::Time& stamp) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return mapped(stamp);
   }
 
   /// A well-formed update: a 4 x 4 x 4 box at global index @p origin, its cells @p value, seen from inside.
@@ -257,7 +262,10 @@ TEST_F(HostileTest, HostileUpdatesLeaveTheMapAndTheManagerAndAFullDiskKeepsTheFi
   ASSERT_TRUE(saved.response.success) << saved.response.message;
   EXPECT_EQ(readFile(ot_path), before) << "a refused update changed the map";
   ASSERT_TRUE(waitFor([&] { return map_ != nullptr; }, 10.0));
-  EXPECT_EQ(map_->header.frame_id, "map");
+  {
+    std::lock_guard<std::mutex> lock(mutex_);  // the callback may replace map_ meanwhile
+    EXPECT_EQ(map_->header.frame_id, "map");
+  }
   {
     std::lock_guard<std::mutex> lock(mutex_);
     size_t named = 0;
@@ -345,8 +353,8 @@ TEST_F(HostileTest, BadStampsAndTfNeitherStopNorMisplaceTheMapping) {
   const ros::Time t3 = ros::Time::now();
   sendFrame(t3);
   EXPECT_TRUE(waitFor([&] { return mapped(t3); }, 10.0));
-  EXPECT_FALSE(mapped(ros::Time(0)));
-  EXPECT_FALSE(mapped(t2 + ros::Duration(3.2e7)));
+  EXPECT_FALSE(mappedNow(ros::Time(0)));
+  EXPECT_FALSE(mappedNow(t2 + ros::Duration(3.2e7)));
 
   // tf 10 s late: the image is too old by then (tf_timeout_s), dropped and counted.
   const ros::Time late = ros::Time::now();
@@ -367,8 +375,8 @@ TEST_F(HostileTest, BadStampsAndTfNeitherStopNorMisplaceTheMapping) {
     sendFrame(last);
   }
   EXPECT_TRUE(waitFor([&] { return mapped(last); }, 10.0));
-  EXPECT_FALSE(mapped(late));
-  EXPECT_FALSE(mapped(loop));
+  EXPECT_FALSE(mappedNow(late));
+  EXPECT_FALSE(mappedNow(loop));
 
   // A mapper whose world frame never appears says so.
   for (int i = 0; i < 14; ++i) {
