@@ -57,6 +57,12 @@ double threadCpuMs() {
 /// The values in use, as the dynamic_reconfigure server shows them.
 void toConfig(const DisparityMapperParameters& p, DisparityMapperConfig* config) {
   config->algorithm = toString(p.drawing.algorithm);
+  config->sensor_profile = toString(p.drawing.sensor_model.profile);
+  config->tail_sigmas = p.drawing.sensor_model.tail_sigmas;
+  config->p_hit = p.drawing.sensor_model.p_hit;
+  config->p_free = p.drawing.sensor_model.p_free;
+  config->p_sky = p.drawing.sensor_model.p_sky;
+  config->free_gap_sigmas = p.drawing.sensor_model.free_gap_sigmas;
   config->max_range_m = p.camera.max_range_m;
   config->min_range_m = p.camera.min_range_m;
   config->delta_d_px = p.camera.delta_d_px;
@@ -213,8 +219,9 @@ void DisparityMapper::onInit() {
     diagnostics_->update();
   });
 
-  NODELET_INFO("DisparityMapper: %s at %.3g m cells into frame '%s', range %.3g m, from '%s'",
-               toString(params_.drawing.algorithm), params_.drawing.resolution_m, params_.world_frame.c_str(),
+  NODELET_INFO("DisparityMapper: %s with the %s profile at %.3g m cells into frame '%s', range %.3g m, from '%s'",
+               toString(params_.drawing.algorithm), toString(params_.drawing.sensor_model.profile),
+               params_.drawing.resolution_m, params_.world_frame.c_str(),
                params_.camera.max_range_m,
                params_.use_depth ? nh.resolveName("depth").c_str() : nh.resolveName("disparity").c_str());
 }
@@ -250,6 +257,17 @@ void DisparityMapper::reconfigure(DisparityMapperConfig& config, uint32_t /*leve
     toConfig(params_, &config);
     return;
   }
+  if (!parseSensorProfile(config.sensor_profile, &next.drawing.sensor_model.profile)) {
+    NODELET_WARN("dynamic_reconfigure: sensor_profile must be gaussian or surface (got '%s'); keeping the previous "
+                 "values", config.sensor_profile.c_str());
+    toConfig(params_, &config);
+    return;
+  }
+  next.drawing.sensor_model.tail_sigmas = config.tail_sigmas;
+  next.drawing.sensor_model.p_hit = config.p_hit;
+  next.drawing.sensor_model.p_free = config.p_free;
+  next.drawing.sensor_model.p_sky = config.p_sky;
+  next.drawing.sensor_model.free_gap_sigmas = config.free_gap_sigmas;
   next.camera.max_range_m = config.max_range_m;
   next.camera.min_range_m = config.min_range_m;
   next.camera.delta_d_px = config.delta_d_px;

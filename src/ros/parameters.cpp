@@ -74,6 +74,15 @@ bool readParameters(Read&& read, DisparityMapperParameters* p, std::string* why)
   if (!parseDrawingAlgorithm(algorithm, &p->drawing.algorithm))
     return fail(why, "algorithm must be one of " + drawingAlgorithmNames() + " (got '" + algorithm + "')");
   read("resolution_m", p->drawing.resolution_m);
+  std::string profile = toString(p->drawing.sensor_model.profile);
+  read("sensor_profile", profile);
+  if (!parseSensorProfile(profile, &p->drawing.sensor_model.profile))
+    return fail(why, "sensor_profile must be gaussian or surface (got '" + profile + "')");
+  read("tail_sigmas", p->drawing.sensor_model.tail_sigmas);
+  read("p_hit", p->drawing.sensor_model.p_hit);
+  read("p_free", p->drawing.sensor_model.p_free);
+  read("p_sky", p->drawing.sensor_model.p_sky);
+  read("free_gap_sigmas", p->drawing.sensor_model.free_gap_sigmas);
   read("k_m", p->drawing.sensor_model.k_m);
   read("p_min", p->drawing.sensor_model.p_min);
   read("p_max", p->drawing.sensor_model.p_max);

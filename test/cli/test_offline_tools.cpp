@@ -86,6 +86,12 @@ TEST(OfflineTools, SimulateMapAndScoreAFlight) {
   EXPECT_GT(jsonNumber(score.out, "occupied_recall"), 0.95) << score.out;
   EXPECT_LT(jsonNumber(score.out, "surface_called_free_fraction"), 0.01) << score.out;
   EXPECT_GT(jsonNumber(score.out, "free_coverage"), 0.3) << score.out;
+  // The mapper's surface profile: few phantom obstacles (the paper's Gaussian
+  // leaves about 8 % on this flight), and the scores per range band.
+  EXPECT_LT(jsonNumber(score.out, "phantom_share"), 0.04) << score.out;
+  EXPECT_GT(jsonNumber(score.out, "f1"), 0.95) << score.out;
+  EXPECT_NE(score.out.find("\"bands\": {\"0-10 m\": {"), std::string::npos) << score.out;
+  EXPECT_NE(score.out.find("\"20+ m\": {"), std::string::npos) << score.out;
 
   // The depth path: the bag's exact depth images with the left camera_info.
   const Result from_depth = run(std::string(BAG_TO_MAP_EXE) + " --bag " + bag + " --output " + dir +

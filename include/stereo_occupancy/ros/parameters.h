@@ -27,7 +27,15 @@ struct DisparityMapperParameters {
   int max_image_pixels = 4096 * 4096;  ///< larger images are refused
   /// Range limits and Δd; size, f, b, cx, cy come with each image.
   StereoCameraConfig camera;
-  DrawingConfig drawing;
+  /// The core's drawing defaults, but for the profile: the mapper draws the
+  /// surface profile (docs/quality.md), the paper's Gaussian stays selectable.
+  DrawingConfig drawing = surfaceDrawing();
+
+  static DrawingConfig surfaceDrawing() {
+    DrawingConfig d;
+    d.sensor_model.profile = SensorProfile::kSurface;
+    return d;
+  }
 
   bool isValid(std::string* why) const;
 };
