@@ -47,6 +47,7 @@ summary="$(grep -m1 'DisparityMapper summary:' "$out/replay_$scenario.log" || tr
 accumulator="$(grep -m1 'OctomapAccumulator summary:' "$out/replay_$scenario.log" || true)"
 field() { echo "$summary" | sed -n "s/.* $1=\([0-9.]*\).*/\1/p"; }  # " key=": cpu_ms_... also ends in ms_...
 quality="$("$bin/evaluate_map" --map "$map" --scenario "$scenario" --views "$out/${scenario}_map" 2>/dev/null)"
+quality="${quality%%\"bands\"*}"  # the whole map's scores (the range bands repeat the keys)
 q() { echo "$quality" | sed -n "s/.*\"$1\": \([0-9.e+-]*\).*/\1/p"; }
 pct() { awk -v v="$1" 'BEGIN { printf "%.1f %%", 100 * v }'; }
 
@@ -60,6 +61,8 @@ echo "  fusion ms:    $(summary="$accumulator" field fusion_ms_median) median, $
 echo "  map quality against the ground truth (within one cell):"
 echo "    occupied precision       $(pct "$(q occupied_precision)")  ($(q occupied_at_surface) of $(q occupied_cells) occupied cells at a true surface)"
 echo "    occupied recall          $(pct "$(q occupied_recall)")  ($(q surface_found) of $(q truth_surface_cells) observed surface cells)"
+echo "    phantom obstacles        $(pct "$(q phantom_share)")  ($(q occupied_phantom) occupied cells in free air, more than a cell from any surface)"
+echo "    F1                       $(q f1)"
 echo "    surface called free      $(pct "$(q surface_called_free_fraction)")"
 echo "    free-space coverage      $(pct "$(q free_coverage)")  (of the truly empty cells the rays crossed)"
 echo "  views:        $out/${scenario}_map_top.png, $out/${scenario}_map_side.png"
