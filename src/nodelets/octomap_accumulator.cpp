@@ -48,6 +48,7 @@ class OctomapAccumulator : public nodelet::Nodelet {
   ros::Time last_stamp_;
   ros::WallTime last_prune_;
   uint64_t updates_received_ = 0, updates_refused_ = 0, leaves_pruned_ = 0, saves_failed_ = 0;
+  bool last_save_failed_ = false;  ///< diagnostics ERROR until a save succeeds again
   double last_fusion_ms_ = 0.0, max_fusion_ms_ = 0.0;
   std::vector<double> fusion_ms_;  ///< per update, for the summary at shutdown (bounded)
   std::string last_problem_;
@@ -90,6 +91,7 @@ void OctomapAccumulator::onInit() {
         save();
       } catch (const std::exception& e) {
         ++saves_failed_;
+        last_save_failed_ = true;
         last_problem_ = std::string("periodic save failed: ") + e.what();
         NODELET_ERROR_THROTTLE(60.0, "periodic save failed (the previous map file stays): %s", e.what());
       }
@@ -144,7 +146,9 @@ void OctomapAccumulator::updateCallback(const OccupancyUpdateConstPtr& msg) {
     const auto start = std::chrono::steady_clock::now();
     if (!map_->integrate(update, &why)) return refuseUpdate(why);
     last_fusion_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-  } catch (const std::exception& e) {  // bad_alloc, length_error: the map is unchanged (see MapAccumulator::admits)
+  } catch (const std::exception& e) {
+    // admits() bounds what an update may allocate; what is left is the map's
+    // own growth running out of memory, which keeps the cells fused so far.
     return refuseUpdate(std::string("fusion failed: ") + e.what());
   }
   max_fusion_ms_ = std::max(max_fusion_ms_, last_fusion_ms_);
@@ -199,6 +203,7 @@ void OctomapAccumulator::publish(const ros::TimerEvent&) {
 
 std::vector<std::string> OctomapAccumulator::save() {
   auto paths = map_->save(params_.save_dir, params_.map_name);
+  last_save_failed_ = false;
   updates_at_last_save_ = map_->updates();
   return paths;
 }
@@ -217,6 +222,7 @@ bool OctomapAccumulator::saveMap(std_srvs::Trigger::Request&, std_srvs::Trigger:
     NODELET_INFO("saved the map: %s", response.message.c_str());
   } catch (const std::exception& e) {
     ++saves_failed_;
+    last_save_failed_ = true;
     last_problem_ = std::string("save failed: ") + e.what();
     response.success = false;
     response.message = e.what();
@@ -235,7 +241,7 @@ bool OctomapAccumulator::reset(std_srvs::Empty::Request&, std_srvs::Empty::Respo
 
 void OctomapAccumulator::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   std::lock_guard<std::mutex> lock(mutex_);
-  if (saves_failed_ > 0)
+  if (last_save_failed_)
     status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, last_problem_);
   else
     status.summary(updates_refused_ > 0 ? diagnostic_msgs::DiagnosticStatus::WARN
