@@ -144,8 +144,8 @@ class DisparityBlockBound {
 
   /// Largest d_max for which a block with this d_min is faithful [px] (0 for sky).
   float maxNearDisparity(float d_min) const {
-    const size_t k = static_cast<size_t>(d_min * bins_per_px_);
-    if (k < max_d_max_.size()) return max_d_max_[k];
+    const float bin = d_min * bins_per_px_;  // compared before the cast: a huge d_min has no size_t
+    if (bin < static_cast<float>(max_d_max_.size())) return max_d_max_[static_cast<size_t>(bin)];
     // Beyond the table (disparities above kMaxTabulatedPx): one cell,
     // z_far - z_near <= c, i.e. d_max <= d_min·bf / (bf - c·d_min).
     const float rest = bf_ - c_ * d_min;

@@ -1,7 +1,9 @@
 #include "stereo_occupancy/disparity_drawer.h"
 
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
+#include <string>
 
 namespace stereo_occupancy {
 
@@ -110,6 +112,17 @@ void DisparityDrawer::checkInput(const cv::Mat& disparity, const Eigen::Isometry
   if (!isValidPose(T_W_C)) throw std::invalid_argument("camera pose is not finite or not a rotation");
 }
 
+namespace {
+/// A cell count for a message: whole below 2^53, else in exponent form (a
+/// conversion of 1e22 to an integer would be undefined).
+std::string cellCount(double cells) {
+  if (cells < 9007199254740992.0) return std::to_string(static_cast<uint64_t>(cells));
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3g", cells);
+  return text;
+}
+}  // namespace
+
 void DisparityDrawer::prepareGrid(const Eigen::Isometry3d& T_W_C, LocalGrid* grid) const {
   // One cell of padding keeps every line strictly inside the grid (the fast
   // path of LineDrawer::drawRay); the blur needs room for its kernels.
@@ -121,7 +134,7 @@ void DisparityDrawer::prepareGrid(const Eigen::Isometry3d& T_W_C, LocalGrid* gri
     throw std::invalid_argument("camera position too far from the world origin for this resolution");
   const Eigen::Array3d cells = (box.sizes() / config_.resolution_m).array() + 2.0 * padding + 2.0;
   if (!(cells.prod() <= static_cast<double>(config_.max_grid_cells)))
-    throw std::invalid_argument("the frustum's grid would have " + std::to_string(static_cast<uint64_t>(cells.prod())) +
+    throw std::invalid_argument("the frustum's grid would have " + cellCount(cells.prod()) +
                                 " cells, more than max_grid_cells = " + std::to_string(config_.max_grid_cells));
   fitGridToBox(box, config_.resolution_m, padding, grid);
 }
