@@ -83,7 +83,7 @@ TEST(SurfaceProfile, ExactModelAndTableAgree) {
   EXPECT_NEAR(profile.endRange(), l_p + 0.125 + dl / LogOddsTable::kSamplesPerSigma, 1e-5);
   for (double l = l_p - 3.5; l <= profile.endRange(); l += 0.013) {
     const double e = l < l_p - 0.125 ? l - l_p + 0.125 : (l > l_p + 0.125 ? l - l_p - 0.125 : 0.0);
-    if (std::abs(std::abs(e) - 0.0) < dl / 32.0 && e != 0.0) continue;  // within one table sample of the edge
+    if (e != 0.0 && std::abs(e) < dl / 32.0) continue;  // within one table sample of the window's edge
     if (std::abs(e + dl) < dl / 32.0) continue;                          // ... of the gap's start
     EXPECT_NEAR(profile.at(static_cast<float>(l)), model.logOddsHat(l, l_p, dl, kCell), 1e-4) << l;
   }
