@@ -56,6 +56,9 @@ struct DrawingConfig {
   /// cells"): one more pass over the grid per image, about 0.1 ms for the
   /// default frustum. For the benchmarks; the mapper does not read it.
   bool count_different_cells = false;
+  /// The line drawing's free-run instruction set: every level draws the same
+  /// cells and values (tested); lower ones for tests and benchmarks.
+  SimdLevel simd = availableSimdLevel();
 
   bool isValid(std::string* why = nullptr) const;
 };

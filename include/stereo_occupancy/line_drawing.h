@@ -27,19 +27,19 @@ enum class SimdLevel {
 /// The level's name: "scalar" or "sse2".
 const char* toString(SimdLevel level);
 
-/// The level in use: the best the target offers, unless limited.
-SimdLevel lineDrawingSimdLevel();
-
-/// Uses at most @p level from now on (for tests and benchmarks: every level
-/// draws the same cells and values); returns the level in use. Not
-/// thread-safe: call it while nothing draws.
-SimdLevel limitLineDrawingSimdLevel(SimdLevel level);
+/// The best level this target offers (the default of DrawingConfig::simd).
+SimdLevel availableSimdLevel();
 
 /// Draws disparity images into a LocalGrid by line drawing. Holds references
 /// to the camera, the lookup tables and the grid; not thread-safe.
 class LineDrawer {
  public:
-  LineDrawer(const StereoCameraModel& camera, const LogOddsTable& table, const PyramidLevelTable& levels);
+  /// @param simd the free run's instruction set; above availableSimdLevel() the best available is used.
+  LineDrawer(const StereoCameraModel& camera, const LogOddsTable& table, const PyramidLevelTable& levels,
+             SimdLevel simd = availableSimdLevel());
+
+  /// The instruction set the free runs use.
+  SimdLevel simdLevel() const { return simd_; }
 
   /// Section V-A: one line per valid pixel of a CV_32FC1 disparity image.
   void drawImage(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
@@ -118,6 +118,7 @@ class LineDrawer {
   const StereoCameraModel& camera_;
   const LogOddsTable& table_;
   const PyramidLevelTable& levels_;
+  SimdLevel simd_;
 };
 
 }  // namespace stereo_occupancy

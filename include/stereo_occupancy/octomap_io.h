@@ -1,19 +1,12 @@
 #pragma once
 /// @file
-/// Local grid -> octomap::OcTree conversion and map files.
+/// Map files: atomic, synced writes of an octomap::OcTree.
 
 #include <octomap/OcTree.h>
 
-#include <memory>
 #include <string>
 
-#include "stereo_occupancy/local_grid.h"
-
 namespace stereo_occupancy {
-
-/// An OcTree at the grid's resolution holding every known, non-zero cell of
-/// @p grid with its log-odds unchanged (setNodeValue, no clamping).
-std::unique_ptr<octomap::OcTree> localGridToOcTree(const LocalGrid& grid);
 
 /// Writes @p tree to @p path: ".ot" keeps the log-odds (octomap::AbstractOcTree::write),
 /// ".bt" keeps occupied / free only (writeBinary). Atomic: written to a

@@ -8,6 +8,8 @@
 /// pixel at (0, 0).
 
 #include <Eigen/Core>
+#include <opencv2/core.hpp>
+
 #include <limits>
 #include <string>
 
@@ -104,5 +106,11 @@ class StereoCameraModel {
   float min_valid_;
   float max_valid_;
 };
+
+/// Disparity d = bf / z (eq. 1) of a depth image: CV_16UC1 in millimetres or
+/// CV_32FC1 in metres; a depth camera's input for the mapper. Depth 0 or not
+/// finite means "no measurement" (NaN out).
+/// @throws std::invalid_argument for another image type.
+void depthToDisparity(const cv::Mat& depth, double bf_px_m, cv::Mat* disparity);
 
 }  // namespace stereo_occupancy

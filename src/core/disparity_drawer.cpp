@@ -84,7 +84,7 @@ DisparityDrawer::DisparityDrawer(const StereoCameraConfig& camera, const Drawing
       model_(config.sensor_model),
       table_(model_, config.resolution_m),
       levels_(camera_, config.resolution_m),
-      line_drawer_(camera_, table_, levels_),
+      line_drawer_(camera_, table_, levels_, config.simd),
       ray_tracer_(camera_, table_, levels_),
       blur_(config.blur) {
   const bool draws_pyramid_lines = config_.algorithm == DrawingAlgorithm::kLinePyramid ||

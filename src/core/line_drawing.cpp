@@ -57,23 +57,14 @@ int freeRunSse2(float* data, int k, int k_end, float free_value, FreeRun* r) {
 }
 #endif
 
-constexpr SimdLevel availableSimdLevel() {
+}  // namespace
+
+SimdLevel availableSimdLevel() {
 #if STEREO_OCCUPANCY_X86_64_SIMD
   return SimdLevel::kSse2;
 #else
   return SimdLevel::kScalar;
 #endif
-}
-
-SimdLevel g_simd_level = availableSimdLevel();
-
-}  // namespace
-
-SimdLevel lineDrawingSimdLevel() { return g_simd_level; }
-
-SimdLevel limitLineDrawingSimdLevel(SimdLevel level) {
-  g_simd_level = std::min(level, availableSimdLevel());
-  return g_simd_level;
 }
 
 const char* toString(SimdLevel level) {
@@ -86,8 +77,9 @@ const char* toString(SimdLevel level) {
   return "?";
 }
 
-LineDrawer::LineDrawer(const StereoCameraModel& camera, const LogOddsTable& table, const PyramidLevelTable& levels)
-    : camera_(camera), table_(table), levels_(levels) {}
+LineDrawer::LineDrawer(const StereoCameraModel& camera, const LogOddsTable& table, const PyramidLevelTable& levels,
+                       SimdLevel simd)
+    : camera_(camera), table_(table), levels_(levels), simd_(std::min(simd, availableSimdLevel())) {}
 
 LineDrawer::RayGrid LineDrawer::rayGrid(const Eigen::Vector3d& W_origin, LocalGrid* grid) const {
   RayGrid g;
@@ -202,7 +194,7 @@ uint64_t LineDrawer::drawRay(const RayGrid& g, const Eigen::Vector3d& W_dir, con
     const float free_value = profile.free_log_odds;  // a local: stores to the grid cannot change it
     // The free run, most of the cells drawn, two cells at a time.
 #if STEREO_OCCUPANCY_X86_64_SIMD
-    if (g_simd_level == SimdLevel::kSse2 && sa <= 0xffffffffLL && sb <= 0xffffffffLL) {
+    if (simd_ == SimdLevel::kSse2 && sa <= 0xffffffffLL && sb <= 0xffffffffLL) {
       FreeRun run{pa, pb, idx_m, dta, dtb, didx_m, sa, sb};
       k = freeRunSse2(data, k, k_free, free_value, &run);
       pa = run.pa;

@@ -2,7 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <limits>
 #include <sstream>
+#include <stdexcept>
 
 namespace stereo_occupancy {
 
@@ -53,6 +56,25 @@ StereoCameraModel::StereoCameraModel(const StereoCameraConfig& config)
 
 double StereoCameraModel::nearDisparity() const {
   return std::min(config_.max_disparity_px, bf_ / config_.min_range_m);
+}
+
+void depthToDisparity(const cv::Mat& depth, double bf_px_m, cv::Mat* disparity) {
+  if (depth.type() != CV_16UC1 && depth.type() != CV_32FC1)
+    throw std::invalid_argument("depth image must be 16UC1 (mm) or 32FC1 (m)");
+  disparity->create(depth.rows, depth.cols, CV_32FC1);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const bool mm = depth.type() == CV_16UC1;
+  const float bf = static_cast<float>(mm ? bf_px_m * 1000.0 : bf_px_m);  // d = bf / z (eq. 1)
+  for (int y = 0; y < depth.rows; ++y) {
+    float* out = disparity->ptr<float>(y);
+    if (mm) {
+      const uint16_t* in = depth.ptr<uint16_t>(y);
+      for (int x = 0; x < depth.cols; ++x) out[x] = in[x] == 0 ? nan : bf / static_cast<float>(in[x]);
+    } else {
+      const float* in = depth.ptr<float>(y);
+      for (int x = 0; x < depth.cols; ++x) out[x] = (in[x] > 0.0f && std::isfinite(in[x])) ? bf / in[x] : nan;
+    }
+  }
 }
 
 }  // namespace stereo_occupancy

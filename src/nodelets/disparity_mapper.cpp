@@ -30,7 +30,6 @@
 
 #include "stereo_occupancy/DisparityMapperConfig.h"
 #include "stereo_occupancy/disparity_drawer.h"
-#include "stereo_occupancy/disparity_io.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/ros/conversions.h"
 #include "stereo_occupancy/ros/parameters.h"

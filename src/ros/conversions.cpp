@@ -3,8 +3,6 @@
 #include <sensor_msgs/image_encodings.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
 
-#include "stereo_occupancy/map_rendering.h"
-
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -189,12 +187,20 @@ void toMsg(const octomap::OcTree& tree, bool binary, const std_msgs::Header& hea
 
 namespace {
 
-std_msgs::ColorRGBA rgba(const cv::Vec3b& bgr) {
+/// rviz colour of a cell at height z: hue from blue (z_min) through green to
+/// red (z_max), full saturation, as octomap_server colours its markers.
+std_msgs::ColorRGBA heightColour(double z, double z_min, double z_max) {
+  const double t = z_max > z_min ? std::clamp((z - z_min) / (z_max - z_min), 0.0, 1.0) : 0.5;
+  const double hue = (1.0 - t) * 4.0;  // in units of 60 degrees: 0 red, 4 blue
+  const float rising = static_cast<float>(1.0 - std::abs(std::fmod(hue, 2.0) - 1.0));
   std_msgs::ColorRGBA c;
-  c.r = bgr[2] / 255.0f;
-  c.g = bgr[1] / 255.0f;
-  c.b = bgr[0] / 255.0f;
   c.a = 1.0f;
+  switch (std::min(static_cast<int>(hue), 3)) {
+    case 0: c.r = 1.0f, c.g = rising; break;
+    case 1: c.r = rising, c.g = 1.0f; break;
+    case 2: c.g = 1.0f, c.b = rising; break;
+    default: c.g = rising, c.b = 1.0f; break;
+  }
   return c;
 }
 
@@ -215,7 +221,7 @@ void occupiedCellMarkers(const octomap::OcTree& tree, const std_msgs::Header& he
     p.y = it.getY();
     p.z = it.getZ();
     m.points.push_back(p);
-    m.colors.push_back(rgba(heightColour(p.z, z_min, z_max)));
+    m.colors.push_back(heightColour(p.z, z_min, z_max));
   }
   for (unsigned d = 0; d <= depth; ++d) {
     auto& m = markers->markers[d];

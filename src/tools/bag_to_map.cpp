@@ -18,7 +18,6 @@
 #include <vector>
 
 #include "stereo_occupancy/disparity_drawer.h"
-#include "stereo_occupancy/disparity_io.h"
 #include "stereo_occupancy/map_accumulator.h"
 #include "stereo_occupancy/ros/conversions.h"
 #include "stereo_occupancy/ros/parameters.h"

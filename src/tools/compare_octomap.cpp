@@ -16,10 +16,10 @@
 #include <vector>
 
 #include "stereo_occupancy/disparity_drawer.h"
-#include "stereo_occupancy/flight_simulation.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
-#include "stereo_occupancy/map_evaluation.h"
+#include "stereo_occupancy/sim/flight_simulation.h"
+#include "stereo_occupancy/sim/map_evaluation.h"
 #include "tool_support.h"
 
 namespace so = stereo_occupancy;

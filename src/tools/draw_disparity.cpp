@@ -15,8 +15,9 @@
 #include <vector>
 
 #include "stereo_occupancy/disparity_drawer.h"
-#include "stereo_occupancy/disparity_io.h"
 #include "stereo_occupancy/octomap_io.h"
+#include "stereo_occupancy/sim/disparity_files.h"
+#include "stereo_occupancy/sim/local_grid_octree.h"
 
 namespace so = stereo_occupancy;
 

@@ -9,8 +9,8 @@
 #include <string>
 #include <vector>
 
-#include "stereo_occupancy/map_evaluation.h"
-#include "stereo_occupancy/map_rendering.h"
+#include "stereo_occupancy/sim/map_evaluation.h"
+#include "stereo_occupancy/sim/map_rendering.h"
 #include "tool_support.h"
 
 namespace so = stereo_occupancy;

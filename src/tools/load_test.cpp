@@ -23,8 +23,8 @@
 #include <vector>
 
 #include "stereo_occupancy/OccupancyUpdate.h"
-#include "stereo_occupancy/flight_simulation.h"
 #include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/sim/flight_simulation.h"
 #include "tool_support.h"
 
 namespace so = stereo_occupancy;

@@ -13,7 +13,7 @@
 #include <vector>
 
 #include "stereo_occupancy/disparity_drawer.h"
-#include "stereo_occupancy/synthetic_scene.h"
+#include "stereo_occupancy/sim/synthetic_scene.h"
 #include "tool_support.h"
 
 namespace so = stereo_occupancy;

@@ -18,8 +18,8 @@
 #include <iostream>
 #include <string>
 
-#include "stereo_occupancy/flight_simulation.h"
 #include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/sim/flight_simulation.h"
 #include "tool_support.h"
 
 namespace so = stereo_occupancy;

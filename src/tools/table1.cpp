@@ -13,8 +13,8 @@
 #include <vector>
 
 #include "stereo_occupancy/disparity_drawer.h"
-#include "stereo_occupancy/disparity_io.h"
-#include "stereo_occupancy/synthetic_scene.h"
+#include "stereo_occupancy/sim/disparity_files.h"
+#include "stereo_occupancy/sim/synthetic_scene.h"
 #include "drawing_benchmark.h"
 #include "tool_support.h"
 

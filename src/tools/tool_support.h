@@ -11,7 +11,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "stereo_occupancy/flight_simulation.h"
+#include "stereo_occupancy/sim/flight_simulation.h"
 
 namespace stereo_occupancy {
 namespace tools {

@@ -13,9 +13,9 @@
 #include <string>
 #include <vector>
 
-#include "stereo_occupancy/disparity_io.h"
+#include "stereo_occupancy/sim/disparity_files.h"
+#include "stereo_occupancy/sim/synthetic_scene.h"
 #include "stereo_occupancy/stereo_camera_model.h"
-#include "stereo_occupancy/synthetic_scene.h"
 
 using namespace stereo_occupancy;
 

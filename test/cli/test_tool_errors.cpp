@@ -18,7 +18,7 @@
 #include <vector>
 
 #include "stereo_occupancy/ros/conversions.h"
-#include "stereo_occupancy/synthetic_scene.h"
+#include "stereo_occupancy/sim/synthetic_scene.h"
 
 namespace so = stereo_occupancy;
 

@@ -12,7 +12,7 @@
 #include <tuple>
 
 #include "stereo_occupancy/disparity_drawer.h"
-#include "stereo_occupancy/synthetic_scene.h"
+#include "stereo_occupancy/sim/synthetic_scene.h"
 
 using namespace stereo_occupancy;
 
@@ -407,28 +407,25 @@ TEST(Drawing, SimdLevelsDrawTheSameGrids) {
   const SyntheticScene scene = table1Scene(&T_table1);
   std::vector<Eigen::Isometry3d> poses = testPoses();
   poses.push_back(T_table1);
-  const SimdLevel best = lineDrawingSimdLevel();
+  const SimdLevel best = availableSimdLevel();
   std::printf("[          ] free run: this target allows %s\n", toString(best));
-  struct Restore {
-    SimdLevel level;
-    ~Restore() { limitLineDrawingSimdLevel(level); }
-  } restore{best};
   for (DrawingAlgorithm algorithm :
        {DrawingAlgorithm::kLine, DrawingAlgorithm::kLinePyramid, DrawingAlgorithm::kLinePyramidBounded}) {
-    DisparityDrawer drawer(cam_cfg, config(algorithm));
+    DrawingConfig scalar_config = config(algorithm);
+    scalar_config.simd = SimdLevel::kScalar;
+    DisparityDrawer scalar(cam_cfg, scalar_config);
     for (size_t p = 0; p < poses.size(); ++p) {
       const cv::Mat image = renderDisparity(scene, cam, poses[p]);
       LocalGrid plain;
-      ASSERT_EQ(limitLineDrawingSimdLevel(SimdLevel::kScalar), SimdLevel::kScalar);
-      drawer.prepareGrid(poses[p], &plain);
-      const DrawStatistics plain_stats = drawer.drawInto(image, poses[p], &plain);
+      const DrawStatistics plain_stats = scalar.draw(image, poses[p], &plain);
       EXPECT_GT(plain_stats.different_grid_cells, 20000u) << toString(algorithm) << " pose " << p;
       for (SimdLevel level : {SimdLevel::kSse2}) {
         if (level > best) continue;
-        ASSERT_EQ(limitLineDrawingSimdLevel(level), level);
+        DrawingConfig simd_config = config(algorithm);
+        simd_config.simd = level;
+        DisparityDrawer drawer(cam_cfg, simd_config);
         LocalGrid simd;
-        drawer.prepareGrid(poses[p], &simd);
-        const DrawStatistics stats = drawer.drawInto(image, poses[p], &simd);
+        const DrawStatistics stats = drawer.draw(image, poses[p], &simd);
         EXPECT_EQ(stats.grid_cells_drawn, plain_stats.grid_cells_drawn);
         ASSERT_EQ(simd.numCells(), plain.numCells());
         EXPECT_EQ(std::memcmp(simd.data(), plain.data(), plain.numCells() * sizeof(float)), 0)

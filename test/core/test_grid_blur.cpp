@@ -4,7 +4,7 @@
 
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/grid_blur.h"
-#include "stereo_occupancy/synthetic_scene.h"
+#include "stereo_occupancy/sim/synthetic_scene.h"
 
 using namespace stereo_occupancy;
 

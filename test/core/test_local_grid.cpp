@@ -5,7 +5,7 @@
 #include <random>
 
 #include "stereo_occupancy/local_grid.h"
-#include "stereo_occupancy/synthetic_scene.h"
+#include "stereo_occupancy/sim/synthetic_scene.h"
 
 using namespace stereo_occupancy;
 

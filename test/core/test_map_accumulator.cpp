@@ -20,10 +20,10 @@
 
 #include "stereo_occupancy/accumulating_octree.h"
 #include "stereo_occupancy/disparity_drawer.h"
-#include "stereo_occupancy/flight_simulation.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
-#include "stereo_occupancy/synthetic_scene.h"
+#include "stereo_occupancy/sim/flight_simulation.h"
+#include "stereo_occupancy/sim/synthetic_scene.h"
 
 using namespace stereo_occupancy;
 

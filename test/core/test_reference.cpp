@@ -15,8 +15,8 @@
 #include <set>
 
 #include "stereo_occupancy/disparity_drawer.h"
-#include "stereo_occupancy/flight_simulation.h"
-#include "stereo_occupancy/synthetic_scene.h"
+#include "stereo_occupancy/sim/flight_simulation.h"
+#include "stereo_occupancy/sim/synthetic_scene.h"
 
 using namespace stereo_occupancy;
 

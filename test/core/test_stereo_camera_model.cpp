@@ -1,6 +1,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
+#include <limits>
+#include <stdexcept>
 
 #include "stereo_occupancy/stereo_camera_model.h"
 
@@ -91,4 +94,29 @@ TEST(StereoCameraModel, ConfigValidation) {
   cfg.cy_px = -10.0;
   cfg.cx_px = cfg.width_px + 10.0;
   EXPECT_TRUE(cfg.isValid(&why)) << why;
+}
+
+// Eq. 1 backwards for a depth camera: d = bf / z from millimetres (16UC1) or
+// metres (32FC1); no depth (0, NaN, inf, negative) becomes an invalid pixel.
+TEST(StereoCameraModel, DepthImageToDisparityEq1) {
+  const double bf = 0.3 * 700.0;  // b = 0.3 m, f = 700 px
+  cv::Mat mm(1, 3, CV_16UC1);
+  mm.at<uint16_t>(0, 0) = 10500;  // 10.5 m
+  mm.at<uint16_t>(0, 1) = 0;
+  mm.at<uint16_t>(0, 2) = 2000;
+  cv::Mat d;
+  stereo_occupancy::depthToDisparity(mm, bf, &d);
+  ASSERT_EQ(d.type(), CV_32FC1);
+  EXPECT_FLOAT_EQ(d.at<float>(0, 0), 20.0f);
+  EXPECT_TRUE(std::isnan(d.at<float>(0, 1)));
+  EXPECT_FLOAT_EQ(d.at<float>(0, 2), 105.0f);
+  cv::Mat m(1, 4, CV_32FC1);
+  m.at<float>(0, 0) = 21.0f;
+  m.at<float>(0, 1) = std::numeric_limits<float>::quiet_NaN();
+  m.at<float>(0, 2) = std::numeric_limits<float>::infinity();
+  m.at<float>(0, 3) = -1.0f;
+  stereo_occupancy::depthToDisparity(m, bf, &d);
+  EXPECT_FLOAT_EQ(d.at<float>(0, 0), 10.0f);
+  for (int x = 1; x < 4; ++x) EXPECT_TRUE(std::isnan(d.at<float>(0, x))) << x;
+  EXPECT_THROW(stereo_occupancy::depthToDisparity(cv::Mat(1, 1, CV_8UC1), bf, &d), std::invalid_argument);
 }

@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "stereo_occupancy/disparity_drawer.h"
-#include "stereo_occupancy/synthetic_scene.h"
+#include "stereo_occupancy/sim/synthetic_scene.h"
 
 using namespace stereo_occupancy;
 

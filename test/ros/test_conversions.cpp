@@ -4,7 +4,7 @@
 #include <ros/message_traits.h>
 
 #include "stereo_occupancy/ros/conversions.h"
-#include "stereo_occupancy/synthetic_scene.h"
+#include "stereo_occupancy/sim/synthetic_scene.h"
 
 using namespace stereo_occupancy;
 

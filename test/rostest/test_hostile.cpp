@@ -35,10 +35,10 @@
 #include <thread>
 #include <vector>
 
-#include "stereo_occupancy/Octomap.h"
 #include "stereo_occupancy/OccupancyUpdate.h"
+#include "stereo_occupancy/Octomap.h"
 #include "stereo_occupancy/ros/conversions.h"
-#include "stereo_occupancy/synthetic_scene.h"
+#include "stereo_occupancy/sim/synthetic_scene.h"
 #include "wait_for.h"
 
 using namespace stereo_occupancy;

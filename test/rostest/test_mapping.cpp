@@ -24,10 +24,10 @@
 #include <mutex>
 #include <vector>
 
-#include "stereo_occupancy/Octomap.h"
 #include "stereo_occupancy/OccupancyUpdate.h"
+#include "stereo_occupancy/Octomap.h"
 #include "stereo_occupancy/ros/conversions.h"
-#include "stereo_occupancy/synthetic_scene.h"
+#include "stereo_occupancy/sim/synthetic_scene.h"
 #include "wait_for.h"
 
 using namespace stereo_occupancy;

@@ -12,8 +12,8 @@
 #include <Eigen/Geometry>
 #include <string>
 
-#include "stereo_occupancy/Octomap.h"
 #include "stereo_occupancy/OccupancyUpdate.h"
+#include "stereo_occupancy/Octomap.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/local_grid.h"
 #include "stereo_occupancy/ros/parameters.h"

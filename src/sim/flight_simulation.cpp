@@ -1,4 +1,4 @@
-#include "stereo_occupancy/flight_simulation.h"
+#include "stereo_occupancy/sim/flight_simulation.h"
 
 #include <cmath>
 #include <limits>

@@ -9,7 +9,7 @@
 #include <cmath>
 #include <limits>
 
-#include "stereo_occupancy/map_evaluation.h"
+#include "stereo_occupancy/sim/map_evaluation.h"
 
 using namespace stereo_occupancy;
 

@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
+#include "stereo_occupancy/sim/synthetic_scene.h"
 #include "stereo_occupancy/stereo_camera_model.h"
-#include "stereo_occupancy/synthetic_scene.h"
 
 namespace stereo_occupancy {
 

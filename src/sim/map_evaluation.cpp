@@ -1,4 +1,4 @@
-#include "stereo_occupancy/map_evaluation.h"
+#include "stereo_occupancy/sim/map_evaluation.h"
 
 #include <algorithm>
 #include <cmath>

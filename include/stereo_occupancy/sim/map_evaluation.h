@@ -10,8 +10,8 @@
 #include <unordered_set>
 #include <vector>
 
-#include "stereo_occupancy/flight_simulation.h"
 #include "stereo_occupancy/local_grid.h"
+#include "stereo_occupancy/sim/flight_simulation.h"
 
 namespace stereo_occupancy {
 

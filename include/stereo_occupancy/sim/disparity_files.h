@@ -1,7 +1,6 @@
 #pragma once
 /// @file
-/// Reading and writing disparity images: PFM (float) and 16-bit PNG; depth
-/// images to disparity (eq. 1).
+/// Disparity image files for the tools and tests: PFM (float) and 16-bit PNG.
 
 #include <opencv2/core.hpp>
 
@@ -20,10 +19,5 @@ void writePfm(const std::string& path, const cv::Mat& image);
 /// Reads a disparity image: .pfm as is; a 16-bit PNG as value / scale, with
 /// the value 0 kept as 0 (infinitely far). @throws std::runtime_error.
 cv::Mat readDisparity(const std::string& path, double png_scale);
-
-/// Disparity d = bf / z of a depth image: CV_16UC1 in millimetres or CV_32FC1
-/// in metres. Depth 0 or not finite means "no measurement" (NaN out).
-/// @throws std::invalid_argument for another image type.
-void depthToDisparity(const cv::Mat& depth, double bf_px_m, cv::Mat* disparity);
 
 }  // namespace stereo_occupancy

@@ -1,4 +1,4 @@
-#include "stereo_occupancy/synthetic_scene.h"
+#include "stereo_occupancy/sim/synthetic_scene.h"
 
 #include <algorithm>
 #include <cmath>

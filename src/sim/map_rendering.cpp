@@ -1,4 +1,4 @@
-#include "stereo_occupancy/map_rendering.h"
+#include "stereo_occupancy/sim/map_rendering.h"
 
 #include <algorithm>
 #include <cmath>
