@@ -21,6 +21,9 @@ sanitize_status=$?
 [ $sanitize_status = 0 ] || { echo "sanitized core tests FAILED:"; tail -40 "$ws/build/sanitize.log"; }
 RESULTS="$results" "$repo/scripts/fuzz.sh" "${FUZZ_SECONDS:-60}"
 fuzz_status=$?
+# One pipeline: bag_to_map and the nodelets give byte-identical maps.
+RESULTS="$results" "$repo/scripts/check_online_offline.sh"
+online_offline_status=$?
 
 summary="$(catkin_test_results build/test_results --verbose)"
 status=$?
@@ -31,4 +34,4 @@ cases=$(cat build/test_results/*/*.xml | grep -o '<testcase ' | wc -l || true)
 failed=$(cat build/test_results/*/*.xml | grep -oE '<(failure|error)[ >]' | wc -l || true)
 [ $sanitize_status = 0 ] || failed=$((failed + 1))  # an abort may leave no JUnit file
 echo "tests: $((cases - failed)) passed, $failed failed"
-[ $status = 0 ] && [ $sanitize_status = 0 ] && [ $fuzz_status = 0 ]
+[ $status = 0 ] && [ $sanitize_status = 0 ] && [ $fuzz_status = 0 ] && [ $online_offline_status = 0 ]

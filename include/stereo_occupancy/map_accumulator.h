@@ -43,17 +43,17 @@ class MapAccumulator {
   /// The map, its inner nodes brought up to date first.
   const octomap::OcTree& tree() const;
 
-  /// True if integrate() would take @p update: consistent (GridUpdate::isConsistent),
+  /// True if integrate() would take @p update: consistent (GridUpdateView::isConsistent),
   /// of the map's resolution, a box of at most max_update_cells cells that lies
   /// inside the OcTree's key range, and a sensor origin near the box (within
   /// its largest edge). Costs O(runs), allocates nothing. Otherwise false
   /// and @p why says what is wrong.
-  bool admits(const GridUpdate& update, std::string* why = nullptr) const;
+  bool admits(const GridUpdateView& update, std::string* why = nullptr) const;
 
   /// Adds every cell's log-odds to the map (octomap's clamped update). Work
   /// and memory follow the cells carried, not the box claimed. Returns
   /// false, leaving the map unchanged, if admits() refuses the update.
-  bool integrate(const GridUpdate& update, std::string* why = nullptr);
+  bool integrate(const GridUpdateView& update, std::string* why = nullptr);
 
   /// Drops the cells farther than max_extent_m (per axis) from the bounding
   /// box of the last kPruneOrigins sensor origins: no single update, however

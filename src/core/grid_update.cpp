@@ -6,7 +6,7 @@
 
 namespace stereo_occupancy {
 
-bool GridUpdate::isConsistent(std::string* why) const {
+bool GridUpdateView::isConsistent(std::string* why) const {
   auto fail = [why](const std::string& text) {
     if (why) *why = text;
     return false;

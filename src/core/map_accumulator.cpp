@@ -59,7 +59,7 @@ void MapAccumulator::reset() {
   next_origin_ = 0;
 }
 
-bool MapAccumulator::admits(const GridUpdate& update, std::string* why) const {
+bool MapAccumulator::admits(const GridUpdateView& update, std::string* why) const {
   auto fail = [why](const std::string& text) {
     if (why) *why = text;
     return false;
@@ -90,7 +90,7 @@ bool MapAccumulator::admits(const GridUpdate& update, std::string* why) const {
   return true;
 }
 
-bool MapAccumulator::integrate(const GridUpdate& update, std::string* why) {
+bool MapAccumulator::integrate(const GridUpdateView& update, std::string* why) {
   if (!admits(update, why)) return false;
   const int offset = static_cast<int>(tree_->coordToKey(0.0));  // key of global index 0
   // Sibling leaves one after another (an octree node's eight cells): the

@@ -3,7 +3,6 @@
 // ROS glue only: parameters come from ros/parameters, messages are converted
 // in ros/conversions, all drawing is the core's DisparityDrawer.
 
-#include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <diagnostic_updater/update_functions.h>
 #include <dynamic_reconfigure/server.h>
@@ -13,7 +12,6 @@
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
-#include <sensor_msgs/image_encodings.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/message_filter.h>
 #include <tf2_ros/transform_listener.h>
@@ -29,9 +27,8 @@
 #include <mutex>
 
 #include "stereo_occupancy/DisparityMapperConfig.h"
-#include "stereo_occupancy/disparity_drawer.h"
-#include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/ros/mapping_pipeline.h"
 #include "stereo_occupancy/ros/parameters.h"
 #include "stereo_occupancy/time_statistics.h"
 
@@ -45,6 +42,14 @@ constexpr double kStampClockToleranceS = 10.0;
 
 /// Images arriving without one mapped for this long: look for world_frame in tf [s].
 constexpr double kNoProgressWarnS = 5.0;
+
+/// At most one warning of a kind in this time [s].
+constexpr double kWarnThrottleS = 5.0;
+/// The world-frame warning repeats less often: it names every frame in tf [s].
+constexpr double kWorldFrameWarnThrottleS = 10.0;
+
+/// Per-image timings kept for the summary at shutdown (at 30 Hz, nine hours).
+constexpr size_t kMaxTimings = 1000000;
 
 /// CPU time of the calling thread [ms].
 double threadCpuMs() {
@@ -96,33 +101,23 @@ class DisparityMapper : public nodelet::Nodelet {
   /// Images come but none has been mapped for a while: says whether
   /// world_frame exists in tf at all (a typo, a missing localisation node).
   void checkWorldFrame();
-  /// Counts an image that has its pose; returns the latest camera_info (may be null).
-  sensor_msgs::CameraInfoConstPtr noteImage();
-  /// Counts and logs (throttled) an image refused for @p why.
-  void refuse(const char* what, const std::string& why);
-
-  /// Draws one image (CV_32FC1 disparity) and publishes the update.
-  void process(const cv::Mat& disparity, const std_msgs::Header& header, const StereoCameraConfig& camera);
+  /// Runs one image that has its pose through the pipeline (@p map_image
+  /// calls FrameMapping::map or mapDepth), then publishes and logs.
+  template <class MapImage>
+  void process(const char* what, MapImage&& map_image);
 
   /// A copy of the parameters in use (dynamic_reconfigure changes them under mutex_).
   DisparityMapperParameters parameters() const {
     std::lock_guard<std::mutex> lock(mutex_);
-    return params_;
+    return mapping_->parameters();
   }
 
   // Everything below is guarded by mutex_: a nodelet's callbacks may run on
   // several threads of the manager's pool at once.
   mutable std::mutex mutex_;
-  DisparityMapperParameters params_;
-  std::unique_ptr<DisparityDrawer> drawer_;  ///< rebuilt when the camera or drawing config changes
-  /// Why no drawer could be built for refused_camera_ with params_.drawing
-  /// (empty: none refused); its images are dropped without trying again.
-  std::string refused_setup_;
-  StereoCameraConfig refused_camera_;
-  LocalGrid grid_;
-  GridUpdate update_;
+  std::unique_ptr<FrameMapping> mapping_;  ///< the pipeline: checks, draw, update
   sensor_msgs::CameraInfoConstPtr camera_info_;
-  uint64_t images_received_ = 0, images_processed_ = 0, dropped_no_transform_ = 0, dropped_invalid_ = 0;
+  uint64_t filter_dropped_ = 0;  ///< images the tf filter dropped (no pose in time); the pipeline counts the rest
   double last_processing_ms_ = 0.0, max_processing_ms_ = 0.0;
   std::vector<double> processing_ms_;  ///< per image, for the summary at shutdown (bounded)
   /// The same span in the callback thread's CPU time: the work without the
@@ -131,9 +126,9 @@ class DisparityMapper : public nodelet::Nodelet {
   std::string last_problem_;
   ros::Time last_image_stamp_;
   uint64_t time_jumps_back_ = 0;
-  uint64_t images_arrived_ = 0;  ///< before the tf filter (images_received_ counts those with a pose)
+  uint64_t images_arrived_ = 0;  ///< before the tf filter (FrameCounters::images counts those with a pose)
   uint64_t processed_at_last_check_ = 0, arrived_at_last_check_ = 0;
-  ros::WallTime last_progress_ = ros::WallTime::now();  ///< when images_processed_ last grew (checkWorldFrame)
+  ros::WallTime last_progress_ = ros::WallTime::now();  ///< when an image was last mapped (checkWorldFrame)
 
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
@@ -161,13 +156,15 @@ void DisparityMapper::onInit() {
   ros::NodeHandle& nh = getNodeHandle();
   ros::NodeHandle& pnh = getPrivateNodeHandle();
 
+  DisparityMapperParameters params;
   std::string why;
-  if (!loadParameters(pnh, &params_, &why)) {
+  if (!loadParameters(pnh, &params, &why)) {
     // Refuse to start: no subscription, no output. The manager and its other
     // nodelets keep running.
     NODELET_FATAL("%s: invalid parameter: %s; DisparityMapper does not start", getName().c_str(), why.c_str());
     return;
   }
+  mapping_ = std::make_unique<FrameMapping>(params);
 
   tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
   tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
@@ -176,20 +173,20 @@ void DisparityMapper::onInit() {
   cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("local_grid_cloud", 1);
   disparity_image_pub_ = nh.advertise<sensor_msgs::Image>("disparity_image", 1);
 
-  if (params_.use_depth) {
+  if (params.use_depth) {
     image_transport_ = std::make_unique<image_transport::ImageTransport>(nh);
-    depth_sub_.subscribe(*image_transport_, "depth", params_.queue_size);
+    depth_sub_.subscribe(*image_transport_, "depth", params.queue_size);
     depth_filter_ = std::make_unique<tf2_ros::MessageFilter<sensor_msgs::Image>>(
-        depth_sub_, *tf_buffer_, params_.world_frame, params_.queue_size, nh);
+        depth_sub_, *tf_buffer_, params.world_frame, params.queue_size, nh);
     depth_filter_->registerCallback(boost::bind(&DisparityMapper::depthCallback, this, _1));
     depth_sub_.registerCallback(boost::bind(&DisparityMapper::arrival<sensor_msgs::Image>, this, _1));
     depth_filter_->registerFailureCallback(
         boost::bind(&DisparityMapper::transformFailure<sensor_msgs::Image>, this, _1, _2));
     camera_info_sub_ = nh.subscribe("camera_info", 1, &DisparityMapper::cameraInfoCallback, this);
   } else {
-    disparity_sub_.subscribe(nh, "disparity", params_.queue_size);
+    disparity_sub_.subscribe(nh, "disparity", params.queue_size);
     disparity_filter_ = std::make_unique<tf2_ros::MessageFilter<stereo_msgs::DisparityImage>>(
-        disparity_sub_, *tf_buffer_, params_.world_frame, params_.queue_size, nh);
+        disparity_sub_, *tf_buffer_, params.world_frame, params.queue_size, nh);
     disparity_filter_->registerCallback(boost::bind(&DisparityMapper::disparityCallback, this, _1));
     disparity_sub_.registerCallback(boost::bind(&DisparityMapper::arrival<stereo_msgs::DisparityImage>, this, _1));
     disparity_filter_->registerFailureCallback(
@@ -200,7 +197,7 @@ void DisparityMapper::onInit() {
 
   reconfigure_server_ = std::make_unique<dynamic_reconfigure::Server<DisparityMapperConfig>>(reconfigure_mutex_, pnh);
   DisparityMapperConfig initial;
-  toConfig(params_, &initial);
+  toConfig(params, &initial);
   {
     boost::recursive_mutex::scoped_lock lock(reconfigure_mutex_);
     reconfigure_server_->updateConfig(initial);
@@ -219,10 +216,10 @@ void DisparityMapper::onInit() {
   });
 
   NODELET_INFO("DisparityMapper: %s with the %s profile at %.3g m cells into frame '%s', range %.3g m, from '%s'",
-               toString(params_.drawing.algorithm), toString(params_.drawing.sensor_model.profile),
-               params_.drawing.resolution_m, params_.world_frame.c_str(),
-               params_.camera.max_range_m,
-               params_.use_depth ? nh.resolveName("depth").c_str() : nh.resolveName("disparity").c_str());
+               toString(params.drawing.algorithm), toString(params.drawing.sensor_model.profile),
+               params.drawing.resolution_m, params.world_frame.c_str(),
+               params.camera.max_range_m,
+               params.use_depth ? nh.resolveName("depth").c_str() : nh.resolveName("disparity").c_str());
 }
 
 DisparityMapper::~DisparityMapper() {
@@ -230,17 +227,18 @@ DisparityMapper::~DisparityMapper() {
   if (processing_ms_.empty()) return;
   const TimeStatistics wall = TimeStatistics::of(processing_ms_);
   const TimeStatistics cpu = TimeStatistics::of(processing_cpu_ms_);
+  const FrameCounters& n = mapping_->counters();
+  const DisparityMapperParameters& params = mapping_->parameters();
   // One line for scripts: counts and the processing time per image (draw,
   // blur, encode, publish). On stderr: rosconsole may be gone at shutdown.
   std::fprintf(stderr, "DisparityMapper summary: images_received=%lu images_processed=%lu dropped_no_transform=%lu "
            "dropped_invalid=%lu ms_per_image_mean=%.3f ms_per_image_median=%.3f ms_per_image_p99=%.3f "
            "ms_per_image_max=%.3f cpu_ms_per_image_median=%.3f cpu_ms_per_image_p99=%.3f algorithm=%s "
            "resolution_m=%.2f\n",
-           static_cast<unsigned long>(images_received_), static_cast<unsigned long>(images_processed_),
-           static_cast<unsigned long>(dropped_no_transform_), static_cast<unsigned long>(dropped_invalid_),
+           static_cast<unsigned long>(n.images), static_cast<unsigned long>(n.mapped),
+           static_cast<unsigned long>(n.no_transform + filter_dropped_), static_cast<unsigned long>(n.refused),
            wall.mean_ms, wall.median_ms, wall.p99_ms, wall.max_ms, cpu.median_ms, cpu.p99_ms,
-           toString(params_.drawing.algorithm),
-           params_.drawing.resolution_m);
+           toString(params.drawing.algorithm), params.drawing.resolution_m);
 }
 
 void DisparityMapper::reconfigure(DisparityMapperConfig& config, uint32_t /*level*/) {
@@ -248,18 +246,19 @@ void DisparityMapper::reconfigure(DisparityMapperConfig& config, uint32_t /*leve
   // (min_range_m < max_range_m, ...) and the algorithm's name are ours. A
   // refused request leaves the values in use, and the server shows those.
   std::lock_guard<std::mutex> lock(mutex_);
-  DisparityMapperParameters next = params_;
+  const DisparityMapperParameters& params = mapping_->parameters();
+  DisparityMapperParameters next = params;
   std::string why;
   if (!parseDrawingAlgorithm(config.algorithm, &next.drawing.algorithm)) {
     NODELET_WARN("dynamic_reconfigure: algorithm must be one of %s (got '%s'); keeping the previous values",
                  drawingAlgorithmNames().c_str(), config.algorithm.c_str());
-    toConfig(params_, &config);
+    toConfig(params, &config);
     return;
   }
   if (!parseSensorProfile(config.sensor_profile, &next.drawing.sensor_model.profile)) {
     NODELET_WARN("dynamic_reconfigure: sensor_profile must be gaussian or surface (got '%s'); keeping the previous "
                  "values", config.sensor_profile.c_str());
-    toConfig(params_, &config);
+    toConfig(params, &config);
     return;
   }
   next.drawing.sensor_model.tail_sigmas = config.tail_sigmas;
@@ -277,12 +276,10 @@ void DisparityMapper::reconfigure(DisparityMapperConfig& config, uint32_t /*leve
   next.drawing.blur.sigma_angle_rad = config.sigma_angle_rad;
   if (!next.isValid(&why)) {
     NODELET_WARN("dynamic_reconfigure: %s; keeping the previous values", why.c_str());
-    toConfig(params_, &config);
+    toConfig(params, &config);
     return;
   }
-  params_ = next;
-  drawer_.reset();  // rebuilt with the new tables on the next image
-  refused_setup_.clear();
+  mapping_->setParameters(next);
 }
 
 void DisparityMapper::cameraInfoCallback(const sensor_msgs::CameraInfoConstPtr& msg) {
@@ -297,10 +294,10 @@ void DisparityMapper::transformFailure(const boost::shared_ptr<const M>& msg, tf
                                                                                : "no transform in time";
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    ++dropped_no_transform_;
+    ++filter_dropped_;
     last_problem_ = std::string("dropped an image: ") + what;
   }
-  NODELET_WARN_THROTTLE(5.0, "dropped an image from '%s' at %.3f: %s (to '%s')", msg->header.frame_id.c_str(),
+  NODELET_WARN_THROTTLE(kWarnThrottleS, "dropped an image from '%s' at %.3f: %s (to '%s')", msg->header.frame_id.c_str(),
                         msg->header.stamp.toSec(), what, parameters().world_frame.c_str());
 }
 
@@ -332,7 +329,7 @@ void DisparityMapper::checkWorldFrame() {
   {
     std::lock_guard<std::mutex> lock(mutex_);
     arrived = images_arrived_;
-    processed = images_processed_;
+    processed = mapping_->counters().mapped;
     // The clock starts with the first image, and again with each one mapped.
     if (processed != processed_at_last_check_ || (arrived > 0 && arrived_at_last_check_ == 0))
       last_progress_ = ros::WallTime::now();
@@ -347,180 +344,73 @@ void DisparityMapper::checkWorldFrame() {
     std::lock_guard<std::mutex> lock(mutex_);
     last_problem_ = "world_frame '" + params.world_frame + "' does not exist in tf";
   }
-  NODELET_WARN_THROTTLE(10.0, "%lu images came but none was mapped for %.0f s: world_frame '%s' does not exist in tf "
+  NODELET_WARN_THROTTLE(kWorldFrameWarnThrottleS, "%lu images came but none was mapped for %.0f s: world_frame '%s' does not exist in tf "
                         "(%s)", static_cast<unsigned long>(arrived), kNoProgressWarnS, params.world_frame.c_str(),
                         frames.empty() ? "tf holds no frames" : frames.c_str());
 }
 
-sensor_msgs::CameraInfoConstPtr DisparityMapper::noteImage() {
-  input_rate_->tick();
-  std::lock_guard<std::mutex> lock(mutex_);
-  ++images_received_;
-  return camera_info_;
-}
-
-void DisparityMapper::refuse(const char* what, const std::string& why) {
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    ++dropped_invalid_;
-    last_problem_ = why;
-  }
-  NODELET_WARN_THROTTLE(5.0, "refused a %s: %s", what, why.c_str());
-}
-
 void DisparityMapper::disparityCallback(const stereo_msgs::DisparityImageConstPtr& msg) {
-  const sensor_msgs::CameraInfoConstPtr info = noteImage();
-  const DisparityMapperParameters params = parameters();  // dynamic_reconfigure may change them meanwhile
-  auto refuse = [this](const std::string& why) { this->refuse("disparity image", why); };
-  if (msg->image.encoding != sensor_msgs::image_encodings::TYPE_32FC1)
-    return refuse("encoding '" + msg->image.encoding + "', expected 32FC1");
-  std::string why;
-  if (!checkImageLayout(msg->image, static_cast<uint64_t>(params.max_image_pixels), &why)) return refuse(why);
-  StereoCameraConfig camera;
-  if (!cameraFromDisparityImage(*msg, info.get(), params, &camera, &why)) return refuse(why);
-  cv_bridge::CvImageConstPtr image;
-  try {
-    image = cv_bridge::toCvShare(msg->image, msg);  // a view of the message's data, no copy
-  } catch (const cv_bridge::Exception& e) {
-    return refuse(e.what());
-  }
-  try {
-    process(image->image, msg->header, camera);
-  } catch (const std::exception& e) {  // bad_alloc and the like: nothing may leave a callback
-    return refuse(std::string("mapping failed: ") + e.what());
-  }
+  process("disparity image", [&](const sensor_msgs::CameraInfoConstPtr& info, FrameResult* result) {
+    return mapping_->map(msg, info, *tf_buffer_, ros::Time::now(), result);
+  });
   if (disparity_image_pub_.getNumSubscribers() > 0)
     disparity_image_pub_.publish(boost::make_shared<sensor_msgs::Image>(msg->image));  // a copy, only for viewers
 }
 
 void DisparityMapper::depthCallback(const sensor_msgs::ImageConstPtr& msg) {
-  const sensor_msgs::CameraInfoConstPtr info = noteImage();
-  const DisparityMapperParameters params = parameters();
-  auto refuse = [this](const std::string& why) { this->refuse("depth image", why); };
-  if (!info) return refuse("no camera_info received yet");
-  if (info->width != msg->width || info->height != msg->height) return refuse("camera_info size differs");
-  std::string why;
-  if (!checkImageLayout(*msg, static_cast<uint64_t>(params.max_image_pixels), &why)) return refuse(why);
-  StereoCameraConfig camera;
-  if (!cameraFromDepthInfo(*info, params, &camera, &why)) return refuse(why);
-  cv::Mat disparity;
-  try {
-    const cv_bridge::CvImageConstPtr depth = cv_bridge::toCvShare(msg);
-    depthToDisparity(depth->image, camera.baseline_m * camera.focal_length_px, &disparity);
-    process(disparity, msg->header, camera);
-  } catch (const std::exception& e) {  // nothing may leave a callback
-    return refuse(e.what());
-  }
+  process("depth image", [&](const sensor_msgs::CameraInfoConstPtr& info, FrameResult* result) {
+    return mapping_->mapDepth(msg, info, *tf_buffer_, ros::Time::now(), result);
+  });
 }
 
-void DisparityMapper::process(const cv::Mat& disparity, const std_msgs::Header& header,
-                              const StereoCameraConfig& camera) {
-  // The image waited in the tf filter until its pose was known; a pose that
-  // came more than tf_timeout_s after the image makes it too old to use.
-  const DisparityMapperParameters params = parameters();
-  if (header.stamp.isZero()) {
-    // tf2 reads time 0 as "the latest pose": the image would be drawn where
-    // the camera is now, not where it was.
-    std::lock_guard<std::mutex> lock(mutex_);
-    ++dropped_invalid_;
-    last_problem_ = "image stamped 0";
-    NODELET_WARN_THROTTLE(5.0, "refused an image from '%s' stamped 0 (no time, no pose)", header.frame_id.c_str());
-    return;
-  }
-  const double age_s = (ros::Time::now() - header.stamp).toSec();
-  if (params.tf_timeout_s > 0.0 && age_s > params.tf_timeout_s) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    ++dropped_no_transform_;
-    last_problem_ = "transform came " + std::to_string(age_s) + " s after the image (tf_timeout_s)";
-    NODELET_WARN_THROTTLE(5.0, "dropped an image: %s", last_problem_.c_str());
-    return;
-  }
-  geometry_msgs::TransformStamped transform;
-  try {
-    transform = tf_buffer_->lookupTransform(params.world_frame, header.frame_id, header.stamp);
-  } catch (const tf2::TransformException& e) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    ++dropped_no_transform_;
-    last_problem_ = e.what();
-    NODELET_WARN_THROTTLE(5.0, "no transform for an image: %s", e.what());
-    return;
-  }
-  Eigen::Isometry3d T_W_C;
+template <class MapImage>
+void DisparityMapper::process(const char* what, MapImage&& map_image) {
+  input_rate_->tick();
   std::lock_guard<std::mutex> lock(mutex_);
-  if (!poseFromTransform(transform, &T_W_C)) {
-    ++dropped_invalid_;
-    last_problem_ = "camera pose is not finite or its quaternion not of unit norm";
-    NODELET_WARN_THROTTLE(5.0, "refused an image: %s", last_problem_.c_str());
-    return;
-  }
-  if (!drawer_ || drawer_->camera().config() != camera) {
-    // A set-up the drawer refuses (e.g. a grid too fine for this camera's
-    // focal length) is reported once; its images are dropped until the
-    // camera or the parameters change.
-    if (!refused_setup_.empty() && refused_camera_ == camera) {
-      ++dropped_invalid_;
-      last_problem_ = refused_setup_;
-      return;
-    }
-    try {
-      drawer_ = std::make_unique<DisparityDrawer>(camera, params_.drawing);  // builds the lookup tables
-      refused_setup_.clear();
-    } catch (const std::exception& e) {  // invalid_argument for a refused set-up; nothing may escape a callback
-      drawer_.reset();
-      refused_setup_ = e.what();
-      refused_camera_ = camera;
-      ++dropped_invalid_;
-      last_problem_ = refused_setup_;
-      NODELET_ERROR("cannot map with this camera and these parameters: %s; its images are dropped until the "
-                    "camera or the parameters (dynamic_reconfigure) change",
-                    e.what());
-      return;
-    }
-  }
   const auto start = std::chrono::steady_clock::now();
   const double start_cpu_ms = threadCpuMs();
-  try {
-    drawer_->draw(disparity, T_W_C, &grid_);
-  } catch (const std::exception& e) {
-    ++dropped_invalid_;
-    last_problem_ = e.what();
-    NODELET_WARN_THROTTLE(5.0, "refused an image: %s", e.what());
+  FrameResult result;
+  const OccupancyUpdatePtr update = map_image(camera_info_, &result);  // catches what it throws
+  if (!update) {
+    last_problem_ = result.why;
+    if (result.setup_refused_now)
+      NODELET_ERROR("cannot map with this camera and these parameters: %s; its images are dropped until the "
+                    "camera or the parameters (dynamic_reconfigure) change", result.why.c_str());
+    else if (result.outcome == FrameOutcome::kNoTransform)
+      NODELET_WARN_THROTTLE(kWarnThrottleS, "dropped a %s: %s", what, result.why.c_str());
+    else if (result.why != mapping_->refusedSetup())  // a refused set-up was reported once, as an error
+      NODELET_WARN_THROTTLE(kWarnThrottleS, "refused a %s: %s", what, result.why.c_str());
     return;
   }
-  encodeGridUpdate(grid_, T_W_C.translation(), &update_);
-  auto msg = boost::make_shared<OccupancyUpdate>();
-  std_msgs::Header out_header = header;
-  out_header.frame_id = params_.world_frame;
-  toMsg(update_, out_header, msg.get());
-  update_pub_.publish(msg);  // as Ptr: no copy to nodelets in the same manager
+  update_pub_.publish(update);  // as Ptr: no copy to nodelets in the same manager
   if (cloud_pub_.getNumSubscribers() > 0) {
     auto cloud = boost::make_shared<sensor_msgs::PointCloud2>();
-    occupiedCellCloud(grid_, out_header, cloud.get());
+    occupiedCellCloud(mapping_->grid(), update->header, cloud.get());
     cloud_pub_.publish(cloud);
   }
   last_processing_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   max_processing_ms_ = std::max(max_processing_ms_, last_processing_ms_);
-  if (processing_ms_.size() < 1000000) {
+  if (processing_ms_.size() < kMaxTimings) {
     processing_ms_.push_back(last_processing_ms_);
     processing_cpu_ms_.push_back(threadCpuMs() - start_cpu_ms);
   }
-  ++images_processed_;
 }
 
 void DisparityMapper::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   std::lock_guard<std::mutex> lock(mutex_);
-  const bool dropping = dropped_no_transform_ + dropped_invalid_ > 0;
-  if (!refused_setup_.empty())
-    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "cannot map with this camera: " + refused_setup_);
+  const FrameCounters& n = mapping_->counters();
+  const bool dropping = n.no_transform + filter_dropped_ + n.refused > 0;
+  if (!mapping_->refusedSetup().empty())
+    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "cannot map with this camera: " + mapping_->refusedSetup());
   else
     status.summary(dropping ? diagnostic_msgs::DiagnosticStatus::WARN : diagnostic_msgs::DiagnosticStatus::OK,
                    dropping ? last_problem_ : "mapping");
-  status.add("algorithm", toString(params_.drawing.algorithm));
+  status.add("algorithm", toString(mapping_->parameters().drawing.algorithm));
   status.add("images arrived", images_arrived_);
-  status.add("images received", images_received_);
-  status.add("images processed", images_processed_);
-  status.add("dropped: no transform", dropped_no_transform_);
-  status.add("dropped: invalid input", dropped_invalid_);
+  status.add("images received", n.images);
+  status.add("images processed", n.mapped);
+  status.add("dropped: no transform", n.no_transform + filter_dropped_);
+  status.add("dropped: invalid input", n.refused);
   status.add("time jumps back", time_jumps_back_);
   status.add("last processing time [ms]", last_processing_ms_);
   status.add("max processing time [ms]", max_processing_ms_);

@@ -17,12 +17,19 @@
 #include <mutex>
 #include <vector>
 
-#include "stereo_occupancy/map_accumulator.h"
 #include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/ros/mapping_pipeline.h"
 #include "stereo_occupancy/ros/parameters.h"
 #include "stereo_occupancy/time_statistics.h"
 
 namespace stereo_occupancy {
+
+namespace {
+/// At most one warning of a kind in this time [s].
+constexpr double kWarnThrottleS = 5.0;
+/// Per-update timings kept for the summary at shutdown.
+constexpr size_t kMaxTimings = 1000000;
+}  // namespace
 
 class OctomapAccumulator : public nodelet::Nodelet {
  public:
@@ -31,8 +38,6 @@ class OctomapAccumulator : public nodelet::Nodelet {
  private:
   void onInit() override;
   void updateCallback(const OccupancyUpdateConstPtr& msg);
-  /// Counts and logs (throttled) an update refused for @p why; requires mutex_.
-  void refuseUpdate(const std::string& why);
   void publish(const ros::TimerEvent&);
   bool saveMap(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response);
   bool reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
@@ -43,11 +48,8 @@ class OctomapAccumulator : public nodelet::Nodelet {
 
   // Everything below is guarded by mutex_ (callbacks may run on several threads).
   std::mutex mutex_;
-  std::unique_ptr<MapAccumulator> map_;
-  std::string frame_id_;  ///< the map's frame: world_frame, or the first update's
-  ros::Time last_stamp_;
-  ros::WallTime last_prune_;
-  uint64_t updates_received_ = 0, updates_refused_ = 0, leaves_pruned_ = 0, saves_failed_ = 0;
+  std::unique_ptr<MapFusion> fusion_;  ///< the pipeline: checks, fusion, pruning
+  uint64_t saves_failed_ = 0;
   bool last_save_failed_ = false;  ///< diagnostics ERROR until a save succeeds again
   double last_fusion_ms_ = 0.0, max_fusion_ms_ = 0.0;
   std::vector<double> fusion_ms_;  ///< per update, for the summary at shutdown (bounded)
@@ -71,9 +73,7 @@ void OctomapAccumulator::onInit() {
     NODELET_FATAL("%s: invalid parameter: %s; OctomapAccumulator does not start", getName().c_str(), why.c_str());
     return;
   }
-  map_ = std::make_unique<MapAccumulator>(params_.map);
-  frame_id_ = params_.world_frame;
-  last_prune_ = ros::WallTime::now();
+  fusion_ = std::make_unique<MapFusion>(params_);
 
   octomap_pub_ = nh.advertise<Octomap>("octomap_binary", 1, /*latch=*/true);
   markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>("occupied_cells_vis_array", 1, /*latch=*/true);
@@ -86,7 +86,7 @@ void OctomapAccumulator::onInit() {
     // Periodic saves, so that a crash loses at most save_period_s of mapping.
     save_timer_ = nh.createWallTimer(ros::WallDuration(params_.save_period_s), [this](const ros::WallTimerEvent&) {
       std::lock_guard<std::mutex> lock(mutex_);
-      if (map_->updates() == updates_at_last_save_) return;
+      if (fusion_->map().updates() == updates_at_last_save_) return;
       try {
         save();
       } catch (const std::exception& e) {
@@ -104,7 +104,7 @@ void OctomapAccumulator::onInit() {
   diagnostics_timer_ = nh.createTimer(ros::Duration(1.0), [this](const ros::TimerEvent&) { diagnostics_->update(); });
 
   NODELET_INFO("OctomapAccumulator: %.3g m cells in frame '%s', map kept within %.0f m of the vehicle, saving to '%s'",
-               params_.map.resolution_m, frame_id_.empty() ? "(the first update's)" : frame_id_.c_str(),
+               params_.map.resolution_m, params_.world_frame.empty() ? "(the first update's)" : params_.world_frame.c_str(),
                params_.map.max_extent_m,
                params_.save_dir.empty() ? "(nowhere)" : params_.save_dir.c_str());
 }
@@ -117,59 +117,48 @@ OctomapAccumulator::~OctomapAccumulator() {
     std::fprintf(stderr,
                  "OctomapAccumulator summary: updates_received=%lu updates_refused=%lu fusion_ms_median=%.3f "
                  "fusion_ms_p99=%.3f fusion_ms_max=%.3f\n",
-                 static_cast<unsigned long>(updates_received_), static_cast<unsigned long>(updates_refused_),
+                 static_cast<unsigned long>(fusion_->counters().received),
+                 static_cast<unsigned long>(fusion_->counters().refused),
                  fusion.median_ms, fusion.p99_ms, fusion.max_ms);
   }
-  if (!map_ || params_.save_dir.empty()) return;
-  if (map_->updates() == 0) return;
+  if (!fusion_ || params_.save_dir.empty()) return;
+  if (fusion_->map().updates() == 0) return;
   try {
     // On stderr: rosconsole may be gone at shutdown.
     for (const auto& path : save())
       std::fprintf(stderr, "OctomapAccumulator: saved the map of %lu updates to %s on shutdown\n",
-                   static_cast<unsigned long>(map_->updates()), path.c_str());
+                   static_cast<unsigned long>(fusion_->map().updates()), path.c_str());
   } catch (const std::exception& e) {
     std::fprintf(stderr, "OctomapAccumulator: could not save the map on shutdown (the previous map file stays): %s\n", e.what());
   }
 }
 
 void OctomapAccumulator::updateCallback(const OccupancyUpdateConstPtr& msg) {
-  // Any node may publish on this topic: everything is checked before the map
-  // is touched, and nothing may leave the callback (it would end the manager).
+  // Any node may publish on this topic: MapFusion checks everything before
+  // the map is touched, and nothing may leave the callback (it would end the manager).
   std::lock_guard<std::mutex> lock(mutex_);
-  ++updates_received_;
+  const bool frame_chosen = !fusion_->frameId().empty();
   std::string why;
+  const auto start = std::chrono::steady_clock::now();
+  bool fused = false;
   try {
-    if (!frame_id_.empty() && msg->header.frame_id != frame_id_)
-      return refuseUpdate("frame '" + msg->header.frame_id + "', the map is in '" + frame_id_ + "'");
-    GridUpdate update;
-    if (!fromMsg(*msg, &update, &why)) return refuseUpdate(why);
-    const auto start = std::chrono::steady_clock::now();
-    if (!map_->integrate(update, &why)) return refuseUpdate(why);
-    last_fusion_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    fused = fusion_->fuse(*msg, &why);  // reads the message in place
   } catch (const std::exception& e) {
     // admits() bounds what an update may allocate; what is left is the map's
     // own growth running out of memory, which keeps the cells fused so far.
-    return refuseUpdate(std::string("fusion failed: ") + e.what());
+    why = std::string("fusion failed: ") + e.what();
   }
+  if (!fused) {
+    last_problem_ = "refused an update: " + why;
+    NODELET_WARN_THROTTLE(kWarnThrottleS, "refused an occupancy update (%lu so far): %s",
+                          static_cast<unsigned long>(fusion_->counters().refused), why.c_str());
+    return;
+  }
+  last_fusion_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   max_fusion_ms_ = std::max(max_fusion_ms_, last_fusion_ms_);
-  if (fusion_ms_.size() < 1000000) fusion_ms_.push_back(last_fusion_ms_);
-  if (frame_id_.empty()) {
-    frame_id_ = msg->header.frame_id;  // world_frame "": the first update's frame, from then on
-    NODELET_INFO("the map is in frame '%s' (the first update's)", frame_id_.c_str());
-  }
-  last_stamp_ = msg->header.stamp;
+  if (fusion_ms_.size() < kMaxTimings) fusion_ms_.push_back(last_fusion_ms_);
+  if (!frame_chosen) NODELET_INFO("the map is in frame '%s' (the first update's)", fusion_->frameId().c_str());
   changed_since_publish_ = true;
-  if ((ros::WallTime::now() - last_prune_).toSec() > params_.prune_period_s) {
-    leaves_pruned_ += map_->prune();
-    last_prune_ = ros::WallTime::now();
-  }
-}
-
-void OctomapAccumulator::refuseUpdate(const std::string& why) {
-  ++updates_refused_;
-  last_problem_ = "refused an update: " + why;
-  NODELET_WARN_THROTTLE(5.0, "refused an occupancy update (%lu so far): %s",
-                        static_cast<unsigned long>(updates_refused_), why.c_str());
 }
 
 void OctomapAccumulator::publish(const ros::TimerEvent&) {
@@ -178,12 +167,12 @@ void OctomapAccumulator::publish(const ros::TimerEvent&) {
   const bool want_cloud = cloud_pub_.getNumSubscribers() > 0;
   if (!want_map && !want_markers && !want_cloud) return;
   std::lock_guard<std::mutex> lock(mutex_);
-  if (!changed_since_publish_ || frame_id_.empty()) return;
+  if (!changed_since_publish_ || fusion_->frameId().empty()) return;
   changed_since_publish_ = false;
   std_msgs::Header header;
-  header.frame_id = frame_id_;
-  header.stamp = last_stamp_;
-  const octomap::OcTree& tree = map_->tree();
+  header.frame_id = fusion_->frameId();
+  header.stamp = fusion_->lastStamp();
+  const octomap::OcTree& tree = fusion_->map().tree();
   if (want_map) {
     auto msg = boost::make_shared<Octomap>();
     toMsg(tree, /*binary=*/true, header, msg.get());
@@ -202,9 +191,9 @@ void OctomapAccumulator::publish(const ros::TimerEvent&) {
 }
 
 std::vector<std::string> OctomapAccumulator::save() {
-  auto paths = map_->save(params_.save_dir, params_.map_name);
+  auto paths = fusion_->map().save(params_.save_dir, params_.map_name);
   last_save_failed_ = false;
-  updates_at_last_save_ = map_->updates();
+  updates_at_last_save_ = fusion_->map().updates();
   return paths;
 }
 
@@ -233,7 +222,7 @@ bool OctomapAccumulator::saveMap(std_srvs::Trigger::Request&, std_srvs::Trigger:
 
 bool OctomapAccumulator::reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
   std::lock_guard<std::mutex> lock(mutex_);
-  map_->reset();
+  fusion_->reset();
   changed_since_publish_ = true;
   NODELET_INFO("map reset");
   return true;
@@ -241,18 +230,18 @@ bool OctomapAccumulator::reset(std_srvs::Empty::Request&, std_srvs::Empty::Respo
 
 void OctomapAccumulator::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   std::lock_guard<std::mutex> lock(mutex_);
+  const FusionCounters& n = fusion_->counters();
   if (last_save_failed_)
     status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, last_problem_);
   else
-    status.summary(updates_refused_ > 0 ? diagnostic_msgs::DiagnosticStatus::WARN
-                                        : diagnostic_msgs::DiagnosticStatus::OK,
-                   updates_refused_ > 0 ? last_problem_ : "accumulating");
-  status.add("frame", frame_id_);
-  status.add("updates received", updates_received_);
-  status.add("updates refused", updates_refused_);
+    status.summary(n.refused > 0 ? diagnostic_msgs::DiagnosticStatus::WARN : diagnostic_msgs::DiagnosticStatus::OK,
+                   n.refused > 0 ? last_problem_ : "accumulating");
+  status.add("frame", fusion_->frameId());
+  status.add("updates received", n.received);
+  status.add("updates refused", n.refused);
   status.add("saves failed", saves_failed_);
-  status.add("leaves", map_->tree().getNumLeafNodes());
-  status.add("leaves pruned (max_extent_m)", leaves_pruned_);
+  status.add("leaves", fusion_->map().tree().getNumLeafNodes());
+  status.add("leaves pruned (max_extent_m)", n.leaves_pruned);
   status.add("last fusion time [ms]", last_fusion_ms_);
   status.add("max fusion time [ms]", max_fusion_ms_);
 }

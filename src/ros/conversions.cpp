@@ -8,6 +8,7 @@
 #include <cstring>
 #include <map>
 #include <sstream>
+#include <utility>
 
 namespace stereo_occupancy {
 
@@ -138,7 +139,7 @@ geometry_msgs::TransformStamped toTransformMsg(const Eigen::Isometry3d& T, const
   return t;
 }
 
-void toMsg(const GridUpdate& update, const std_msgs::Header& header, OccupancyUpdate* msg) {
+void toMsg(GridUpdate&& update, const std_msgs::Header& header, OccupancyUpdate* msg) {
   msg->header = header;
   msg->sensor_origin.x = update.W_sensor_origin.x();
   msg->sensor_origin.y = update.W_sensor_origin.y();
@@ -148,26 +149,27 @@ void toMsg(const GridUpdate& update, const std_msgs::Header& header, OccupancyUp
     msg->origin_index[i] = update.origin_index[i];
     msg->size[i] = static_cast<uint32_t>(update.size[i]);
   }
-  msg->run_start = update.run_start;
-  msg->run_length = update.run_length;
-  msg->log_odds = update.log_odds;
+  // The arrays change hands; the cells are not copied.
+  msg->run_start = std::move(update.run_start);
+  msg->run_length = std::move(update.run_length);
+  msg->log_odds = std::move(update.log_odds);
 }
 
-bool fromMsg(const OccupancyUpdate& msg, GridUpdate* update, std::string* why) {
-  update->W_sensor_origin = Eigen::Vector3d(msg.sensor_origin.x, msg.sensor_origin.y, msg.sensor_origin.z);
-  update->resolution_m = msg.resolution;
+bool viewOf(const OccupancyUpdate& msg, GridUpdateView* view, std::string* why) {
+  view->W_sensor_origin = Eigen::Vector3d(msg.sensor_origin.x, msg.sensor_origin.y, msg.sensor_origin.z);
+  view->resolution_m = msg.resolution;
   for (int i = 0; i < 3; ++i) {
     if (msg.size[i] > static_cast<uint32_t>(std::numeric_limits<int>::max())) {
       if (why) *why = "grid size out of range";
       return false;
     }
-    update->origin_index[i] = msg.origin_index[i];
-    update->size[i] = static_cast<int>(msg.size[i]);
+    view->origin_index[i] = msg.origin_index[i];
+    view->size[i] = static_cast<int>(msg.size[i]);
   }
-  update->run_start = msg.run_start;
-  update->run_length = msg.run_length;
-  update->log_odds = msg.log_odds;
-  return update->isConsistent(why);
+  view->run_start = msg.run_start;
+  view->run_length = msg.run_length;
+  view->log_odds = msg.log_odds;
+  return true;
 }
 
 void toMsg(const octomap::OcTree& tree, bool binary, const std_msgs::Header& header, Octomap* msg) {

@@ -1,12 +1,12 @@
 // bag_to_map: builds a map from a recorded bag without a roscore, as fast as
-// it can, with the nodelets' own code: the same parameters, conversions,
-// DisparityDrawer and MapAccumulator. Reads DisparityImage (or depth image +
-// CameraInfo) and /tf, /tf_static; writes PREFIX.bt and PREFIX.ot.
+// it can, through the nodelets' own pipeline (FrameMapping, MapFusion) with
+// the same parameters; only the transport differs: the bag and a
+// tf2::BufferCore instead of subscriptions and a tf listener. Reads
+// DisparityImage (or depth image + CameraInfo) and /tf, /tf_static; writes
+// PREFIX.bt and PREFIX.ot.
 
-#include <cv_bridge/cv_bridge.h>
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
-#include <sensor_msgs/image_encodings.h>
 #include <tf2/buffer_core.h>
 #include <tf2_msgs/TFMessage.h>
 
@@ -17,9 +17,7 @@
 #include <string>
 #include <vector>
 
-#include "stereo_occupancy/disparity_drawer.h"
-#include "stereo_occupancy/map_accumulator.h"
-#include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/ros/mapping_pipeline.h"
 #include "stereo_occupancy/ros/parameters.h"
 
 namespace so = stereo_occupancy;
@@ -32,13 +30,14 @@ const char* kUsage =
     "                  [--camera-info-topic T] [--param NAME=VALUE ...]\n"
     "Maps the bag's DisparityImage messages (or, with --depth-topic, depth images with their\n"
     "camera_info) at the poses on /tf and /tf_static, and writes PREFIX.bt and PREFIX.ot.\n"
+    "Topics default to launch/mapping.launch's: /stereo/disparity and /stereo/left/camera_info.\n"
     "--param takes the nodelets' parameter names (config/mapping.yaml), e.g. algorithm=raytrace.\n";
 
-struct Image {
-  ros::Time stamp;
-  std::string frame;
-  cv::Mat disparity;  // CV_32FC1
-  so::StereoCameraConfig camera;
+/// An image waiting for its pose, as in the nodelet's tf2_ros::MessageFilter.
+struct PendingImage {
+  stereo_msgs::DisparityImageConstPtr disparity;  ///< or
+  sensor_msgs::ImageConstPtr depth;
+  const std_msgs::Header& header() const { return disparity ? disparity->header : depth->header; }
 };
 
 void progress(size_t done, size_t total, double elapsed_s) {
@@ -89,7 +88,7 @@ int main(int argc, char** argv) {
     std::cerr << "bag_to_map: error: --bag and --output are required\n" << kUsage;
     return 2;
   }
-  if (!depth_topic.empty() && info_topic.empty()) info_topic = "/camera_info";
+  if (info_topic.empty()) info_topic = depth_topic.empty() ? "/stereo/left/camera_info" : "/camera_info";
 
   so::DisparityMapperParameters mapper;
   so::OctomapAccumulatorParameters accumulator;
@@ -102,61 +101,49 @@ int main(int argc, char** argv) {
 
   try {
     rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
-    std::vector<std::string> topics = {"/tf", "/tf_static"};
     const std::string image_topic = depth_topic.empty() ? disparity_topic : depth_topic;
-    topics.push_back(image_topic);
-    if (!info_topic.empty()) topics.push_back(info_topic);
+    const std::vector<std::string> topics = {"/tf", "/tf_static", image_topic, info_topic};
     rosbag::View view(bag, rosbag::TopicQuery(topics));
     const size_t total = rosbag::View(bag, rosbag::TopicQuery(image_topic)).size();
     if (total == 0) throw std::runtime_error("no messages on '" + image_topic + "' in the bag");
 
     tf2::BufferCore tf(ros::Duration(3600.0));
-    so::MapAccumulator map(accumulator.map);
-    std::unique_ptr<so::DisparityDrawer> drawer;
-    so::LocalGrid grid;
-    so::GridUpdate update;
+    so::FrameMapping mapping(mapper);
+    so::MapFusion fusion(accumulator);
     sensor_msgs::CameraInfoConstPtr info;
-    std::deque<Image> pending;  // images waiting for their pose
-    size_t read = 0, mapped = 0, dropped_pose = 0, refused = 0;
-    double draw_ms = 0.0, fusion_ms = 0.0;
+    std::deque<PendingImage> pending;
+    size_t read = 0, unread = 0, queue_dropped = 0, fusion_refused = 0;
+    double mapping_ms = 0.0, fusion_ms = 0.0;
     ros::Time latest_tf;
     const auto start = Clock::now();
 
-    auto mapPending = [&](bool flush) {
+    // Maps the images whose pose has come, in order, at bag time `now`;
+    // `flush` (the bag's end): those still waiting are dropped.
+    auto mapPending = [&](const ros::Time& now, bool flush) {
       while (!pending.empty()) {
-        Image& im = pending.front();
-        std::string error;
-        if (!tf.canTransform(mapper.world_frame, im.frame, im.stamp, &error)) {
-          // Wait while newer poses may still come; drop once tf is past it or the bag ends.
-          if (!flush && (latest_tf.isZero() || latest_tf < im.stamp + ros::Duration(mapper.tf_timeout_s))) return;
-          ++dropped_pose;
-          pending.pop_front();
-          continue;
-        }
-        Eigen::Isometry3d T_W_C;
-        if (!so::poseFromTransform(tf.lookupTransform(mapper.world_frame, im.frame, im.stamp), &T_W_C)) {
-          ++refused;
+        const PendingImage& image = pending.front();
+        const std_msgs::Header& header = image.header();
+        if (!tf.canTransform(mapper.world_frame, header.frame_id, header.stamp)) {
+          // Waits while a pose in time may still come (FrameMapping drops later ones as too old).
+          if (!flush && (latest_tf.isZero() || latest_tf < header.stamp + ros::Duration(mapper.tf_timeout_s))) return;
+          ++queue_dropped;
           pending.pop_front();
           continue;
         }
         const auto t0 = Clock::now();
-        try {  // one bad image (a camera or a pose the drawer refuses) does not end the run
-          if (!drawer || drawer->camera().config() != im.camera)
-            drawer = std::make_unique<so::DisparityDrawer>(im.camera, mapper.drawing);
-          drawer->draw(im.disparity, T_W_C, &grid);
-        } catch (const std::invalid_argument& e) {
-          ++refused;
-          std::cerr << "\nbag_to_map: refused an image: " << e.what() << std::endl;
-          pending.pop_front();
-          continue;
-        }
-        so::encodeGridUpdate(grid, T_W_C.translation(), &update);
+        so::FrameResult result;
+        const so::OccupancyUpdatePtr update =
+            image.disparity ? mapping.map(image.disparity, info, tf, now, &result)
+                            : mapping.mapDepth(image.depth, info, tf, now, &result);
         const auto t1 = Clock::now();
-        if (!map.integrate(update, &error)) throw std::runtime_error(error);
-        const auto t2 = Clock::now();
-        draw_ms += std::chrono::duration<double, std::milli>(t1 - t0).count();
-        fusion_ms += std::chrono::duration<double, std::milli>(t2 - t1).count();
-        ++mapped;
+        if (update && !fusion.fuse(*update, &why)) {
+          ++fusion_refused;
+          std::cerr << "\nbag_to_map: the map refused an update: " << why << std::endl;
+        }
+        if (!update && result.outcome == so::FrameOutcome::kRefused)
+          std::cerr << "\nbag_to_map: refused an image: " << result.why << std::endl;
+        mapping_ms += std::chrono::duration<double, std::milli>(t1 - t0).count();
+        fusion_ms += std::chrono::duration<double, std::milli>(Clock::now() - t1).count();
         pending.pop_front();
       }
     };
@@ -173,7 +160,7 @@ int main(int argc, char** argv) {
         } catch (const std::exception& e) {
           std::cerr << "\nbag_to_map: skipped a message on " << m.getTopic() << ": " << e.what() << std::endl;
         }
-        mapPending(false);
+        mapPending(m.getTime(), false);
       } else if (m.getTopic() == info_topic) {
         try {
           info = m.instantiate<sensor_msgs::CameraInfo>();
@@ -182,60 +169,43 @@ int main(int argc, char** argv) {
         }
       } else if (m.getTopic() == image_topic) {
         ++read;
-        Image im;
+        PendingImage image;
         try {
-          if (depth_topic.empty()) {
-            const auto msg = m.instantiate<stereo_msgs::DisparityImage>();
-            if (!msg) throw std::runtime_error("not a stereo_msgs/DisparityImage");
-            if (msg->image.encoding != sensor_msgs::image_encodings::TYPE_32FC1)
-              throw std::runtime_error("encoding '" + msg->image.encoding + "', expected 32FC1");
-            if (!so::checkImageLayout(msg->image, static_cast<uint64_t>(mapper.max_image_pixels), &why))
-              throw std::runtime_error(why);
-            if (!so::cameraFromDisparityImage(*msg, info.get(), mapper, &im.camera, &why))
-              throw std::runtime_error(why);
-            im.disparity = cv_bridge::toCvCopy(msg->image)->image;
-            im.stamp = msg->header.stamp;
-            im.frame = msg->header.frame_id;
-          } else {
-            const auto msg = m.instantiate<sensor_msgs::Image>();
-            if (!msg || !info) throw std::runtime_error("a depth image without camera_info");
-            if (!so::checkImageLayout(*msg, static_cast<uint64_t>(mapper.max_image_pixels), &why))
-              throw std::runtime_error(why);
-            if (info->width != msg->width || info->height != msg->height)
-              throw std::runtime_error("camera_info size differs from the depth image's");
-            if (!so::cameraFromDepthInfo(*info, mapper, &im.camera, &why)) throw std::runtime_error(why);
-            so::depthToDisparity(cv_bridge::toCvShare(msg)->image, im.camera.baseline_m * im.camera.focal_length_px,
-                                 &im.disparity);
-            im.stamp = msg->header.stamp;
-            im.frame = msg->header.frame_id;
-          }
-          pending.push_back(std::move(im));
+          if (depth_topic.empty()) image.disparity = m.instantiate<stereo_msgs::DisparityImage>();
+          else image.depth = m.instantiate<sensor_msgs::Image>();
+        } catch (const std::exception& e) {
+          std::cerr << "\nbag_to_map: skipped a message on " << m.getTopic() << ": " << e.what() << std::endl;
+        }
+        if (!image.disparity && !image.depth) {
+          ++unread;
+        } else {
+          pending.push_back(std::move(image));
           while (pending.size() > static_cast<size_t>(mapper.queue_size)) {  // the oldest waits no longer
             pending.pop_front();
-            ++dropped_pose;
+            ++queue_dropped;
           }
-        } catch (const std::exception& e) {
-          ++refused;
-          std::cerr << "\nbag_to_map: refused an image: " << e.what() << std::endl;
         }
-        mapPending(false);
+        mapPending(m.getTime(), false);
         progress(read, total, std::chrono::duration<double>(Clock::now() - start).count());
       }
     }
-    mapPending(true);
+    mapPending(latest_tf, true);
     progress(read, total, std::chrono::duration<double>(Clock::now() - start).count());
     std::cerr << std::endl;
 
     const auto slash = prefix.find_last_of('/');
     const std::string dir = slash == std::string::npos ? "." : prefix.substr(0, slash);
     const std::string name = slash == std::string::npos ? prefix : prefix.substr(slash + 1);
-    const auto paths = map.save(dir, name);
+    const auto paths = fusion.map().save(dir, name);
     const double total_s = std::chrono::duration<double>(Clock::now() - start).count();
-    std::cout << "{\"images\": " << read << ", \"mapped\": " << mapped << ", \"dropped_no_pose\": " << dropped_pose
-              << ", \"refused\": " << refused << ", \"algorithm\": \"" << so::toString(mapper.drawing.algorithm)
+    const so::FrameCounters& n = mapping.counters();
+    const double mapped = static_cast<double>(std::max<uint64_t>(n.mapped, 1));
+    std::cout << "{\"images\": " << read << ", \"mapped\": " << n.mapped
+              << ", \"dropped_no_pose\": " << queue_dropped + n.no_transform
+              << ", \"refused\": " << unread + n.refused + fusion_refused
+              << ", \"algorithm\": \"" << so::toString(mapper.drawing.algorithm)
               << "\", \"resolution_m\": " << mapper.drawing.resolution_m
-              << ", \"draw_ms_per_image\": " << (mapped ? draw_ms / mapped : 0.0)
-              << ", \"fusion_ms_per_image\": " << (mapped ? fusion_ms / mapped : 0.0)
+              << ", \"draw_ms_per_image\": " << mapping_ms / mapped << ", \"fusion_ms_per_image\": " << fusion_ms / mapped
               << ", \"total_s\": " << total_s << ", \"map\": [\"" << paths[0] << "\", \"" << paths[1] << "\"]}"
               << std::endl;
   } catch (const std::exception& e) {

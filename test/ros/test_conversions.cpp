@@ -29,10 +29,14 @@ TEST(Conversions, OccupancyUpdateRoundTrip) {
   OccupancyUpdate msg;
   std_msgs::Header header;
   header.frame_id = "map";
-  toMsg(update, header, &msg);
-  GridUpdate back;
+  const float* cells_before = update.log_odds.data();
+  toMsg(std::move(update), header, &msg);
+  EXPECT_EQ(msg.log_odds.data(), cells_before);  // moved into the message, not copied
+  GridUpdateView back;
   std::string why;
-  ASSERT_TRUE(fromMsg(msg, &back, &why)) << why;
+  ASSERT_TRUE(viewOf(msg, &back, &why)) << why;
+  EXPECT_EQ(back.log_odds.begin(), msg.log_odds.data());  // read in place
+  ASSERT_TRUE(back.isConsistent(&why)) << why;
   std::vector<std::pair<Eigen::Vector3i, float>> cells;
   back.forEachCell([&](const Eigen::Vector3i& g, float v) { cells.emplace_back(g, v); });
   ASSERT_EQ(cells.size(), 3u);
@@ -43,19 +47,27 @@ TEST(Conversions, OccupancyUpdateRoundTrip) {
   EXPECT_FLOAT_EQ(cells[2].second, 2.0f);
   EXPECT_EQ(back.W_sensor_origin, Eigen::Vector3d(1, 2, 3));
 
-  // Inconsistent messages are refused with a reason.
+  // Inconsistent messages are seen as such, with a reason.
+  auto consistent = [&](const OccupancyUpdate& m) {
+    GridUpdateView view;
+    return viewOf(m, &view, &why) && view.isConsistent(&why);
+  };
   OccupancyUpdate bad = msg;
   bad.log_odds.pop_back();
-  EXPECT_FALSE(fromMsg(bad, &back, &why));
+  EXPECT_FALSE(consistent(bad));
   bad = msg;
   bad.run_start[1] = 1000;  // beyond the grid
-  EXPECT_FALSE(fromMsg(bad, &back, &why));
+  EXPECT_FALSE(consistent(bad));
   bad = msg;
   bad.log_odds[0] = std::nanf("");
-  EXPECT_FALSE(fromMsg(bad, &back, &why));
+  EXPECT_FALSE(consistent(bad));
   bad = msg;
   bad.resolution = 0.0;
-  EXPECT_FALSE(fromMsg(bad, &back, &why));
+  EXPECT_FALSE(consistent(bad));
+  bad = msg;
+  bad.size[0] = 0x80000000u;  // not an int
+  GridUpdateView view;
+  EXPECT_FALSE(viewOf(bad, &view, &why));
 }
 
 TEST(Conversions, CameraFromDisparityImage) {

@@ -152,7 +152,7 @@ class HostileTest : public ::testing::Test {
     std_msgs::Header header;
     header.frame_id = "map";
     header.stamp = ros::Time::now();
-    toMsg(u, header, &msg);
+    toMsg(std::move(u), header, &msg);
     return msg;
   }
   /// An update that claims a box of @p size at @p origin and carries one cell of 1 at each linear index.

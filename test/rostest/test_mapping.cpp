@@ -118,9 +118,9 @@ TEST_F(MappingTest, UpdatesMapSaveAndDroppedImages) {
   EXPECT_EQ(first->header.stamp, t0);
   EXPECT_DOUBLE_EQ(first->resolution, 0.25);
   EXPECT_NEAR(first->sensor_origin.z, 2.0, 1e-6);
-  GridUpdate update;
+  GridUpdateView update;
   std::string why;
-  ASSERT_TRUE(fromMsg(*first, &update, &why)) << why;
+  ASSERT_TRUE(viewOf(*first, &update, &why) && update.isConsistent(&why)) << why;
   size_t wall = 0, wall_occupied = 0, front = 0, front_free = 0, behind = 0, other_occupied = 0;
   const double c = update.resolution_m;
   update.forEachCell([&](const Eigen::Vector3i& g, float v) {
@@ -268,9 +268,9 @@ TEST_F(MappingTest, DepthInputReconfigureAndInvalidParameters) {
   // surface profile's gap, where z = bf/d rounded in float moves a cell
   // between "free" and "no information" (not sent).
   auto cellsOf = [](const OccupancyUpdate& msg) {
-    GridUpdate u;
+    GridUpdateView u;
     std::string why;
-    EXPECT_TRUE(fromMsg(msg, &u, &why)) << why;
+    EXPECT_TRUE(viewOf(msg, &u, &why) && u.isConsistent(&why)) << why;
     std::map<std::array<int, 3>, float> cells;
     u.forEachCell([&](const Eigen::Vector3i& g, float v) { cells[{g.x(), g.y(), g.z()}] = v; });
     return cells;

@@ -52,9 +52,13 @@ void toDisparityImageMsg(const cv::Mat& disparity, const std_msgs::Header& heade
 geometry_msgs::TransformStamped toTransformMsg(const Eigen::Isometry3d& T, const ros::Time& stamp,
                                                const std::string& parent, const std::string& child);
 
-void toMsg(const GridUpdate& update, const std_msgs::Header& header, OccupancyUpdate* msg);
-/// False (with the reason) if the message's sizes or values do not fit together.
-bool fromMsg(const OccupancyUpdate& msg, GridUpdate* update, std::string* why);
+/// The update as a message: its arrays move into the message (no copy of the cells).
+void toMsg(GridUpdate&& update, const std_msgs::Header& header, OccupancyUpdate* msg);
+/// A view of the message's cells in place (no copy); @p msg must outlive it.
+/// False (with the reason) if the sizes do not fit an int; whether runs and
+/// values fit together is GridUpdateView::isConsistent(), which
+/// MapAccumulator::integrate() checks.
+bool viewOf(const OccupancyUpdate& msg, GridUpdateView* view, std::string* why);
 
 /// The tree as an octomap_msgs/Octomap-compatible message: binary (.bt
 /// content) or full (.ot content, log-odds).

@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# One pipeline online and offline: a short simulated flight mapped by
+# bag_to_map and replayed through the nodelets (launch/replay.launch) must
+# give byte-identical .bt and .ot files. Needs a built workspace; writes a
+# JUnit file to $RESULTS if set. FRAMES (default 60), SCENARIO (default posts).
+set -euo pipefail
+repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+ws="${WS:-$repo/build/ws}"
+out="$repo/build/online_offline"
+export PATH="/usr/bin:$PATH"
+bin="$ws/devel/lib/stereo_occupancy"
+scenario="${SCENARIO:-posts}"
+rm -rf "$out"
+mkdir -p "$out/online"
+"$bin/simulate_flight" --scenario "$scenario" --frames "${FRAMES:-60}" --output "$out/flight.bag" 2>/dev/null
+"$bin/bag_to_map" --bag "$out/flight.bag" --output "$out/offline" >"$out/bag_to_map.json" 2>"$out/bag_to_map.log"
+set +u
+# shellcheck disable=SC1091
+source "$ws/devel/setup.bash"
+set -u
+roslaunch stereo_occupancy replay.launch bag:="$out/flight.bag" save_dir:="$out/online" >"$out/replay.log" 2>&1
+
+failure=""
+for ext in bt ot; do
+  if ! cmp -s "$out/offline.$ext" "$out/online/stereo_occupancy_map.$ext"; then
+    failure="$failure the .$ext files differ;"
+  fi
+done
+grep -q '"dropped_no_pose": 0, "refused": 0' "$out/bag_to_map.json" || failure="$failure bag_to_map dropped images;"
+if [ -n "$failure" ]; then
+  echo "online and offline maps differ:$failure see $out"
+else
+  echo "online and offline maps are byte-identical ($(stat -c %s "$out/offline.bt") + $(stat -c %s "$out/offline.ot") bytes)"
+fi
+if [ -n "${RESULTS:-}" ]; then
+  mkdir -p "$RESULTS"
+  {
+    echo '<?xml version="1.0" encoding="UTF-8"?>'
+    echo "<testsuite name=\"online_offline\" tests=\"1\" failures=\"$([ -z "$failure" ] && echo 0 || echo 1)\" errors=\"0\">"
+    echo "  <testcase classname=\"online_offline\" name=\"bag_to_map_equals_replay_launch_${scenario}\">"
+    [ -z "$failure" ] || echo "    <failure message=\"$failure see build/online_offline\"/>"
+    echo "  </testcase>"
+    echo "</testsuite>"
+  } >"$RESULTS/online_offline.xml"
+fi
+[ -z "$failure" ]

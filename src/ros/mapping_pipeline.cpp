@@ -1,0 +1,163 @@
+#include "stereo_occupancy/ros/mapping_pipeline.h"
+
+#include <sensor_msgs/image_encodings.h>
+#include <tf2/exceptions.h>
+
+#include <boost/make_shared.hpp>
+
+#include <utility>
+
+#include "stereo_occupancy/ros/conversions.h"
+
+namespace stereo_occupancy {
+
+FrameMapping::FrameMapping(const DisparityMapperParameters& params) : params_(params) {}
+
+void FrameMapping::setParameters(const DisparityMapperParameters& params) {
+  params_ = params;
+  drawer_.reset();  // rebuilt with the new tables on the next image
+  refused_setup_.clear();
+}
+
+OccupancyUpdatePtr FrameMapping::finish(FrameOutcome outcome, std::string why, FrameResult* result) {
+  result->outcome = outcome;
+  result->why = std::move(why);
+  if (outcome == FrameOutcome::kNoTransform) ++counters_.no_transform;
+  if (outcome == FrameOutcome::kRefused) ++counters_.refused;
+  return nullptr;
+}
+
+OccupancyUpdatePtr FrameMapping::map(const stereo_msgs::DisparityImageConstPtr& msg,
+                                     const sensor_msgs::CameraInfoConstPtr& info, const tf2::BufferCore& tf,
+                                     const ros::Time& now, FrameResult* result) {
+  *result = FrameResult();
+  ++counters_.images;
+  if (msg->image.encoding != sensor_msgs::image_encodings::TYPE_32FC1)
+    return finish(FrameOutcome::kRefused, "encoding '" + msg->image.encoding + "', expected 32FC1", result);
+  std::string why;
+  if (!checkImageLayout(msg->image, static_cast<uint64_t>(params_.max_image_pixels), &why))
+    return finish(FrameOutcome::kRefused, why, result);
+  StereoCameraConfig camera;
+  if (!cameraFromDisparityImage(*msg, info.get(), params_, &camera, &why))
+    return finish(FrameOutcome::kRefused, why, result);
+  try {
+    const cv_bridge::CvImageConstPtr image = cv_bridge::toCvShare(msg->image, msg);  // a view, no copy
+    return mapDisparity(image->image, msg->header, camera, tf, now, result);
+  } catch (const std::exception& e) {  // cv_bridge, bad_alloc: one image fails, the pipeline goes on
+    return finish(FrameOutcome::kRefused, std::string("mapping failed: ") + e.what(), result);
+  }
+}
+
+OccupancyUpdatePtr FrameMapping::mapDepth(const sensor_msgs::ImageConstPtr& msg,
+                                          const sensor_msgs::CameraInfoConstPtr& info, const tf2::BufferCore& tf,
+                                          const ros::Time& now, FrameResult* result) {
+  *result = FrameResult();
+  ++counters_.images;
+  if (!info) return finish(FrameOutcome::kRefused, "no camera_info received yet", result);
+  if (info->width != msg->width || info->height != msg->height)
+    return finish(FrameOutcome::kRefused, "camera_info size differs from the depth image's", result);
+  std::string why;
+  if (!checkImageLayout(*msg, static_cast<uint64_t>(params_.max_image_pixels), &why))
+    return finish(FrameOutcome::kRefused, why, result);
+  StereoCameraConfig camera;
+  if (!cameraFromDepthInfo(*info, params_, &camera, &why)) return finish(FrameOutcome::kRefused, why, result);
+  try {
+    const cv_bridge::CvImageConstPtr depth = cv_bridge::toCvShare(msg);
+    depthToDisparity(depth->image, camera.baseline_m * camera.focal_length_px, &depth_disparity_);
+    return mapDisparity(depth_disparity_, msg->header, camera, tf, now, result);
+  } catch (const std::exception& e) {
+    return finish(FrameOutcome::kRefused, std::string("mapping failed: ") + e.what(), result);
+  }
+}
+
+OccupancyUpdatePtr FrameMapping::mapDisparity(const cv::Mat& disparity, const std_msgs::Header& header,
+                                              const StereoCameraConfig& camera, const tf2::BufferCore& tf,
+                                              const ros::Time& now, FrameResult* result) {
+  // tf2 reads time 0 as "the latest pose": the image would be drawn where
+  // the camera is now, not where it was.
+  if (header.stamp.isZero()) return finish(FrameOutcome::kRefused, "image stamped 0 (no time, no pose)", result);
+  const double age_s = (now - header.stamp).toSec();
+  if (params_.tf_timeout_s > 0.0 && age_s > params_.tf_timeout_s)
+    return finish(FrameOutcome::kNoTransform,
+                  "transform came " + std::to_string(age_s) + " s after the image (tf_timeout_s)", result);
+  geometry_msgs::TransformStamped transform;
+  try {
+    transform = tf.lookupTransform(params_.world_frame, header.frame_id, header.stamp);
+  } catch (const tf2::TransformException& e) {
+    return finish(FrameOutcome::kNoTransform, e.what(), result);
+  }
+  Eigen::Isometry3d T_W_C;
+  if (!poseFromTransform(transform, &T_W_C))
+    return finish(FrameOutcome::kRefused, "camera pose is not finite or its quaternion not of unit norm", result);
+  DisparityDrawer* drawer = drawerFor(camera, result);
+  if (!drawer) return finish(FrameOutcome::kRefused, refused_setup_, result);
+  try {
+    drawer->draw(disparity, T_W_C, &grid_);
+  } catch (const std::invalid_argument& e) {
+    return finish(FrameOutcome::kRefused, e.what(), result);
+  }
+  GridUpdate update;
+  update.log_odds.reserve(last_cells_);
+  update.run_start.reserve(last_runs_);
+  update.run_length.reserve(last_runs_);
+  encodeGridUpdate(grid_, T_W_C.translation(), &update);
+  last_cells_ = update.log_odds.size();
+  last_runs_ = update.run_start.size();
+  auto msg = boost::make_shared<OccupancyUpdate>();
+  std_msgs::Header out_header = header;
+  out_header.frame_id = params_.world_frame;
+  toMsg(std::move(update), out_header, msg.get());
+  ++counters_.mapped;
+  result->outcome = FrameOutcome::kMapped;
+  return msg;
+}
+
+DisparityDrawer* FrameMapping::drawerFor(const StereoCameraConfig& camera, FrameResult* result) {
+  if (drawer_ && drawer_->camera().config() == camera) return drawer_.get();
+  // A set-up the drawer refuses (e.g. a grid too fine for this camera's focal
+  // length) is tried once; its images are refused until the camera or the
+  // parameters change.
+  if (!refused_setup_.empty() && refused_camera_ == camera) return nullptr;
+  try {
+    drawer_ = std::make_unique<DisparityDrawer>(camera, params_.drawing);  // builds the lookup tables
+    refused_setup_.clear();
+    return drawer_.get();
+  } catch (const std::invalid_argument& e) {
+    drawer_.reset();
+    refused_setup_ = e.what();
+    refused_camera_ = camera;
+    result->setup_refused_now = true;
+    return nullptr;
+  }
+}
+
+MapFusion::MapFusion(const OctomapAccumulatorParameters& params)
+    : params_(params), map_(params.map), frame_id_(params.world_frame) {}
+
+bool MapFusion::refuse(const std::string& text, std::string* why) {
+  ++counters_.refused;
+  if (why) *why = text;
+  return false;
+}
+
+bool MapFusion::fuse(const OccupancyUpdate& msg, std::string* why) {
+  ++counters_.received;
+  if (!frame_id_.empty() && msg.header.frame_id != frame_id_)
+    return refuse("frame '" + msg.header.frame_id + "', the map is in '" + frame_id_ + "'", why);
+  GridUpdateView update;
+  std::string reason;
+  if (!viewOf(msg, &update, &reason) || !map_.integrate(update, &reason)) return refuse(reason, why);
+  if (frame_id_.empty()) frame_id_ = msg.header.frame_id;  // world_frame "": the first update's, from then on
+  last_stamp_ = msg.header.stamp;
+  // Pruning follows the updates' time, so that a replay prunes where the flight did.
+  if (last_prune_.isZero() || last_stamp_ < last_prune_) last_prune_ = last_stamp_;
+  if ((last_stamp_ - last_prune_).toSec() > params_.prune_period_s) {
+    counters_.leaves_pruned += map_.prune();
+    last_prune_ = last_stamp_;
+  }
+  return true;
+}
+
+void MapFusion::reset() { map_.reset(); }
+
+}  // namespace stereo_occupancy

@@ -1,0 +1,159 @@
+// The mapping pipeline that the nodelets and bag_to_map share, with a real
+// tf2::BufferCore (no roscore needed).
+
+#include <gtest/gtest.h>
+
+#include <tf2/buffer_core.h>
+
+#include <boost/make_shared.hpp>
+
+#include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/ros/mapping_pipeline.h"
+#include "stereo_occupancy/sim/synthetic_scene.h"
+
+using namespace stereo_occupancy;
+
+namespace {
+
+/// A wall 12 m ahead of a camera 2 m up, looking along the world's x axis.
+class PipelineTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    T_W_C_.setIdentity();
+    T_W_C_.linear() << 0, 0, 1, -1, 0, 0, 0, -1, 0;  // optical z along world x, y down
+    T_W_C_.translation() = Eigen::Vector3d(0.0, 0.0, 2.0);
+    SyntheticScene scene;
+    scene.addBox(Eigen::Vector3d(12.0, -3.0, 0.0), Eigen::Vector3d(13.0, 3.0, 4.0));
+    image_ = renderDisparity(scene, StereoCameraModel(StereoCameraConfig()), T_W_C_);
+  }
+
+  /// The image at @p stamp, and its pose in tf.
+  stereo_msgs::DisparityImageConstPtr frame(double stamp_s, bool with_pose = true) {
+    const ros::Time stamp(stamp_s);
+    if (with_pose) tf_.setTransform(toTransformMsg(T_W_C_, stamp, "map", "camera_optical"), "test");
+    std_msgs::Header header;
+    header.stamp = stamp;
+    header.frame_id = "camera_optical";
+    auto msg = boost::make_shared<stereo_msgs::DisparityImage>();
+    toDisparityImageMsg(image_, header, StereoCameraConfig(), 128.0, 1.0 / 16.0, msg.get());
+    return msg;
+  }
+
+  tf2::BufferCore tf_{ros::Duration(100.0)};
+  Eigen::Isometry3d T_W_C_;
+  cv::Mat image_;
+};
+
+}  // namespace
+
+TEST_F(PipelineTest, AnImageWithItsPoseBecomesAnUpdateTheMapFuses) {
+  FrameMapping mapping{DisparityMapperParameters()};
+  FrameResult result;
+  const OccupancyUpdatePtr update = mapping.map(frame(10.0), nullptr, tf_, ros::Time(10.001), &result);
+  ASSERT_TRUE(update) << result.why;
+  EXPECT_EQ(result.outcome, FrameOutcome::kMapped);
+  EXPECT_EQ(update->header.frame_id, "map");  // the world frame, not the camera's
+  EXPECT_EQ(update->header.stamp, ros::Time(10.0));
+  EXPECT_NEAR(update->sensor_origin.z, 2.0, 1e-9);
+  EXPECT_GT(update->log_odds.size(), 10000u);
+  GridUpdateView view;
+  std::string why;
+  ASSERT_TRUE(viewOf(*update, &view, &why) && view.isConsistent(&why)) << why;
+  size_t wall_occupied = 0;
+  view.forEachCell([&](const Eigen::Vector3i& g, float v) { wall_occupied += g.x() == 48 && v > 0.0f; });
+  EXPECT_GT(wall_occupied, 100u);  // the wall's face, x in [12, 12.25) m
+
+  MapFusion fusion{OctomapAccumulatorParameters()};
+  ASSERT_TRUE(fusion.fuse(*update, &why)) << why;
+  EXPECT_EQ(fusion.map().updates(), 1u);
+  EXPECT_EQ(fusion.frameId(), "map");
+  EXPECT_EQ(fusion.lastStamp(), ros::Time(10.0));
+  const octomap::OcTreeNode* wall = fusion.map().tree().search(12.1, 0.1, 2.1);
+  ASSERT_NE(wall, nullptr);
+  EXPECT_GT(wall->getLogOdds(), 0.0f);
+  EXPECT_EQ(mapping.counters().mapped, 1u);
+  EXPECT_EQ(mapping.counters().images, 1u);
+}
+
+TEST_F(PipelineTest, PosesLateOrMissingAndStampZeroAreNotMapped) {
+  FrameMapping mapping{DisparityMapperParameters()};  // tf_timeout_s = 1
+  FrameResult result;
+  EXPECT_FALSE(mapping.map(frame(10.0), nullptr, tf_, ros::Time(11.5), &result));  // pose known 1.5 s late
+  EXPECT_EQ(result.outcome, FrameOutcome::kNoTransform);
+  EXPECT_NE(result.why.find("tf_timeout_s"), std::string::npos) << result.why;
+  EXPECT_FALSE(mapping.map(frame(20.0, /*with_pose=*/false), nullptr, tf_, ros::Time(20.0), &result));
+  EXPECT_EQ(result.outcome, FrameOutcome::kNoTransform);
+  auto unstamped = boost::make_shared<stereo_msgs::DisparityImage>(*frame(30.0));
+  unstamped->header.stamp = ros::Time();
+  EXPECT_FALSE(mapping.map(unstamped, nullptr, tf_, ros::Time(30.0), &result));
+  EXPECT_EQ(result.outcome, FrameOutcome::kRefused);
+  EXPECT_EQ(mapping.counters().images, 3u);
+  EXPECT_EQ(mapping.counters().no_transform, 2u);
+  EXPECT_EQ(mapping.counters().refused, 1u);
+  EXPECT_EQ(mapping.counters().mapped, 0u);
+}
+
+// A camera the drawer refuses is tried once and reported once; its images
+// are refused with the same reason until the parameters change.
+TEST_F(PipelineTest, ARefusedCameraSetUpIsReportedOnce) {
+  FrameMapping mapping{DisparityMapperParameters()};
+  auto too_fine = [&](double stamp_s) {  // f = 1 px: 0.25 m cells would need lines finer than 2^-10 px
+    auto msg = boost::make_shared<stereo_msgs::DisparityImage>(*frame(stamp_s));
+    msg->f = 1.0f;
+    return stereo_msgs::DisparityImageConstPtr(msg);
+  };
+  FrameResult first, second;
+  EXPECT_FALSE(mapping.map(too_fine(10.0), nullptr, tf_, ros::Time(10.0), &first));
+  EXPECT_TRUE(first.setup_refused_now);
+  EXPECT_FALSE(mapping.refusedSetup().empty());
+  EXPECT_FALSE(mapping.map(too_fine(11.0), nullptr, tf_, ros::Time(11.0), &second));
+  EXPECT_FALSE(second.setup_refused_now);
+  EXPECT_EQ(second.why, first.why);
+  EXPECT_EQ(mapping.counters().refused, 2u);
+  mapping.setParameters(mapping.parameters());  // dynamic_reconfigure: try again
+  EXPECT_TRUE(mapping.refusedSetup().empty());
+  FrameResult good;
+  EXPECT_TRUE(mapping.map(frame(12.0), nullptr, tf_, ros::Time(12.0), &good)) << good.why;
+}
+
+TEST_F(PipelineTest, TheMapRefusesUpdatesOfAnotherFrameAndChoosesTheFirstWhenAskedTo) {
+  FrameMapping mapping{DisparityMapperParameters()};
+  FrameResult result;
+  const OccupancyUpdatePtr update = mapping.map(frame(10.0), nullptr, tf_, ros::Time(10.0), &result);
+  ASSERT_TRUE(update) << result.why;
+  OccupancyUpdate odom = *update;
+  odom.header.frame_id = "odom";
+  MapFusion fusion{OctomapAccumulatorParameters()};
+  std::string why;
+  EXPECT_FALSE(fusion.fuse(odom, &why));
+  EXPECT_NE(why.find("'odom'"), std::string::npos) << why;
+  EXPECT_EQ(fusion.map().updates(), 0u);
+  EXPECT_EQ(fusion.counters().refused, 1u);
+
+  OctomapAccumulatorParameters any_frame;
+  any_frame.world_frame = "";
+  MapFusion first_frame{any_frame};
+  EXPECT_EQ(first_frame.frameId(), "");
+  ASSERT_TRUE(first_frame.fuse(odom, &why)) << why;
+  EXPECT_EQ(first_frame.frameId(), "odom");
+  EXPECT_FALSE(first_frame.fuse(*update, &why));  // "map" now differs from the map's frame
+}
+
+// Pruning follows the updates' stamps, so that a replay prunes where the flight did.
+TEST_F(PipelineTest, TheMapIsPrunedOnTheUpdatesClock) {
+  OctomapAccumulatorParameters params;
+  params.map.max_extent_m = 5.0;  // the wall, 10 m ahead of the camera, is beyond it
+  params.prune_period_s = 2.0;
+  FrameMapping mapping{DisparityMapperParameters()};
+  MapFusion fusion{params};
+  std::string why;
+  FrameResult result;
+  for (double t : {10.0, 11.0, 12.5}) {
+    const OccupancyUpdatePtr update = mapping.map(frame(t), nullptr, tf_, ros::Time(t), &result);
+    ASSERT_TRUE(update) << result.why;
+    ASSERT_TRUE(fusion.fuse(*update, &why)) << why;
+    if (t < 12.0) EXPECT_EQ(fusion.counters().leaves_pruned, 0u) << t;  // less than 2 s of updates
+  }
+  EXPECT_GT(fusion.counters().leaves_pruned, 0u);
+  EXPECT_EQ(fusion.map().tree().search(12.1, 0.1, 2.1), nullptr);
+}
