@@ -60,6 +60,17 @@ struct DrawingConfig {
   /// cells and values (tested); lower ones for tests and benchmarks.
   SimdLevel simd = availableSimdLevel();
 
+  /// The parameters (parameter_table.h): f(spec, member) for each, the
+  /// sensor model's and the blur's included.
+  template <typename Self, typename F>
+  static void forEachParameter(Self& c, F&& f) {
+    f(textParameter("algorithm", "drawing algorithm (section V, VI; bounded: beyond the paper)"), c.algorithm);
+    f(numberParameter("resolution_m", "m", 0.01, 10.0, "grid cell edge c"), c.resolution_m);
+    InverseSensorModelConfig::forEachParameter(c.sensor_model, f);
+    BlurConfig::forEachParameter(c.blur, f);
+  }
+
+  /// The ranges of forEachParameter(), and max_grid_cells >= 1.
   bool isValid(std::string* why = nullptr) const;
 };
 

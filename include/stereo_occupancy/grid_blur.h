@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "stereo_occupancy/local_grid.h"
+#include "stereo_occupancy/parameter_table.h"
 
 namespace stereo_occupancy {
 
@@ -22,6 +23,18 @@ struct BlurConfig {
   double truncate_sigmas = 3.0;  ///< kernel radius = ceil(truncate_sigmas · σ) [σ]
 
   bool enabled() const { return sigma_trans_m > 0.0 || sigma_angle_rad > 0.0; }
+
+  /// The parameters (parameter_table.h): f(spec, member) for each.
+  template <typename Self, typename F>
+  static void forEachParameter(Self& c, F&& f) {
+    f(numberParameter("sigma_trans_m", "m", 0.0, 10.0, "translational pose uncertainty (eq. 17); 0 and 0: no blur"),
+      c.sigma_trans_m);
+    f(numberParameter("sigma_angle_rad", "rad", 0.0, 0.5, "angular pose uncertainty (eq. 17)"), c.sigma_angle_rad);
+    f(numberParameter("sigma_step_cells", "cells", 0.1, 10.0, "sigma is rounded to multiples of this"),
+      c.sigma_step_cells);
+  }
+
+  /// The ranges of forEachParameter(), and truncate_sigmas in [1, 6].
   bool isValid(std::string* why = nullptr) const;
   bool operator==(const BlurConfig& o) const {
     return sigma_trans_m == o.sigma_trans_m && sigma_angle_rad == o.sigma_angle_rad &&

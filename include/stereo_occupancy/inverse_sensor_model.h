@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "stereo_occupancy/parameter_table.h"
 #include "stereo_occupancy/stereo_camera_model.h"
 
 namespace stereo_occupancy {
@@ -59,6 +60,25 @@ struct InverseSensorModelConfig {
   /// kSurface: the gap in front of l_p without information, in units of Δl.
   double free_gap_sigmas = 1.0;
 
+  /// The parameters (parameter_table.h): f(spec, member) for each.
+  template <typename Self, typename F>
+  static void forEachParameter(Self& c, F&& f) {
+    f(textParameter("sensor_profile", "a measurement's profile along its ray: gaussian (eqs. 9-10) or surface"),
+      c.profile);
+    f(numberParameter("p_hit", "", 0.51, 0.99, "surface: probability of the cell holding the measurement"), c.p_hit);
+    f(numberParameter("p_free", "", 0.01, 0.49, "surface: probability of the free space before the gap"), c.p_free);
+    f(numberParameter("p_sky", "", 0.01, 0.5, "surface: probability along a ray without a range; at least p_free"),
+      c.p_sky);
+    f(numberParameter("free_gap_sigmas", "Δl", 0.0, 4.0, "surface: no information this far before the measurement"),
+      c.free_gap_sigmas);
+    f(numberParameter("tail_sigmas", "Δl", 0.0, 3.0, "gaussian: how far behind the peak a measurement speaks"),
+      c.tail_sigmas);
+    f(numberParameter("k_m", "m", 0.001, 10.0, "significance k of one measurement (eq. 9)"), c.k_m);
+    f(numberParameter("p_min", "", 0.01, 0.49, "free-space probability (eq. 10)"), c.p_min);
+    f(numberParameter("p_max", "", 0.51, 0.99, "cap of the peak probability"), c.p_max);
+  }
+
+  /// The ranges of forEachParameter(), and p_sky >= p_free.
   bool isValid(std::string* why = nullptr) const;
   bool operator==(const InverseSensorModelConfig& o) const {
     return profile == o.profile && k_m == o.k_m && p_min == o.p_min && p_max == o.p_max &&

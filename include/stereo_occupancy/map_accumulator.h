@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "stereo_occupancy/grid_update.h"
+#include "stereo_occupancy/parameter_table.h"
 
 namespace stereo_occupancy {
 
@@ -29,6 +30,24 @@ struct MapAccumulatorConfig {
   /// before anything is allocated. As DrawingConfig::max_grid_cells.
   uint64_t max_update_cells = uint64_t{64} << 20;
 
+  /// The parameters (parameter_table.h): f(spec, member) for each.
+  template <typename Self, typename F>
+  static void forEachParameter(Self& c, F&& f) {
+    f(numberParameter("resolution_m", "m", 0.01, 10.0, "map cell edge; updates at another resolution are refused"),
+      c.resolution_m);
+    f(numberParameter("clamping_min_prob", "", 0.01, 0.49, "lower clamping bound of a cell"), c.clamping_min_prob);
+    f(numberParameter("clamping_max_prob", "", 0.51, 0.99, "upper clamping bound of a cell"), c.clamping_max_prob);
+    f(numberParameter("occupancy_threshold_prob", "", 0.01, 0.99,
+                      "cells above it are occupied; between the clamping bounds"),
+      c.occupancy_threshold_prob);
+    f(numberParameter("max_extent_m", "m", 0.0, 100000.0,
+                      "the map keeps this half edge around the vehicle's last positions; 0: everything"),
+      c.max_extent_m);
+    f(numberParameter("max_update_cells", "cells", 1.0, 2147483647.0, "updates claiming a larger box are refused"),
+      c.max_update_cells);
+  }
+
+  /// The ranges of forEachParameter(), and the threshold between the clamping bounds.
   bool isValid(std::string* why = nullptr) const;
 };
 

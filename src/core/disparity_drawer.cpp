@@ -61,15 +61,12 @@ bool parseDrawingAlgorithm(const std::string& name, DrawingAlgorithm* algorithm)
 }
 
 bool DrawingConfig::isValid(std::string* why) const {
-  if (!(std::isfinite(resolution_m) && resolution_m >= 0.01 && resolution_m <= 10.0)) {
-    if (why) *why = "resolution_m must be in [0.01, 10]";
-    return false;
-  }
+  if (!sensor_model.isValid(why) || !blur.isValid(why) || !parametersInRange(*this, why)) return false;
   if (max_grid_cells < 1) {
     if (why) *why = "max_grid_cells must be >= 1";
     return false;
   }
-  return sensor_model.isValid(why) && blur.isValid(why);
+  return true;
 }
 
 bool isValidPose(const Eigen::Isometry3d& T_W_C) {

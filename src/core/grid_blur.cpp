@@ -7,15 +7,11 @@
 namespace stereo_occupancy {
 
 bool BlurConfig::isValid(std::string* why) const {
-  auto fail = [why](const char* text) {
-    if (why) *why = text;
+  if (!parametersInRange(*this, why)) return false;
+  if (!(truncate_sigmas >= 1.0 && truncate_sigmas <= 6.0)) {
+    if (why) *why = "truncate_sigmas must be in [1, 6]";
     return false;
-  };
-  if (!(std::isfinite(sigma_trans_m) && sigma_trans_m >= 0.0)) return fail("sigma_trans_m must be finite and >= 0");
-  if (!(std::isfinite(sigma_angle_rad) && sigma_angle_rad >= 0.0 && sigma_angle_rad < 1.0))
-    return fail("sigma_angle_rad must be in [0, 1)");
-  if (!(sigma_step_cells >= 0.1 && sigma_step_cells <= 10.0)) return fail("sigma_step_cells must be in [0.1, 10]");
-  if (!(truncate_sigmas >= 1.0 && truncate_sigmas <= 6.0)) return fail("truncate_sigmas must be in [1, 6]");
+  }
   return true;
 }
 

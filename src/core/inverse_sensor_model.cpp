@@ -21,19 +21,13 @@ bool parseSensorProfile(const std::string& name, SensorProfile* profile) {
 }
 
 bool InverseSensorModelConfig::isValid(std::string* why) const {
-  auto fail = [why](const char* text) {
-    if (why) *why = text;
+  if (!parametersInRange(*this, why)) return false;
+  if (!(p_sky >= p_free)) {
+    if (why) *why = "p_sky must be >= p_free";
     return false;
-  };
-  if (!(std::isfinite(k_m) && k_m > 0.0)) return fail("k_m must be finite and > 0");
-  if (!(p_min > 0.0 && p_min < 0.5)) return fail("p_min must be in (0, 0.5)");
-  if (!(p_max > 0.5 && p_max < 1.0)) return fail("p_max must be in (0.5, 1)");
-  if (!(tail_sigmas >= 0.0 && tail_sigmas <= LogOddsTable::kTailSigmas)) return fail("tail_sigmas must be in [0, 3]");
-  if (!(p_hit > 0.5 && p_hit < 1.0)) return fail("p_hit must be in (0.5, 1)");
-  if (!(p_free > 0.0 && p_free < 0.5)) return fail("p_free must be in (0, 0.5)");
-  if (!(p_sky >= p_free && p_sky <= 0.5)) return fail("p_sky must be in [p_free, 0.5]");
-  if (!(free_gap_sigmas >= 0.0 && free_gap_sigmas <= LogOddsTable::kFrontSigmas))
-    return fail("free_gap_sigmas must be in [0, 4]");
+  }
+  static_assert(LogOddsTable::kTailSigmas == 3.0 && LogOddsTable::kFrontSigmas == 4.0,
+                "the table's tail_sigmas and free_gap_sigmas ranges end where LogOddsTable's profile does");
   return true;
 }
 

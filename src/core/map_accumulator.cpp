@@ -11,18 +11,11 @@
 namespace stereo_occupancy {
 
 bool MapAccumulatorConfig::isValid(std::string* why) const {
-  auto fail = [why](const char* text) {
-    if (why) *why = text;
+  if (!parametersInRange(*this, why)) return false;
+  if (!(occupancy_threshold_prob > clamping_min_prob && occupancy_threshold_prob < clamping_max_prob)) {
+    if (why) *why = "occupancy_threshold_prob must lie between clamping_min_prob and clamping_max_prob";
     return false;
-  };
-  if (!(std::isfinite(resolution_m) && resolution_m >= 0.01 && resolution_m <= 10.0))
-    return fail("resolution_m must be in [0.01, 10]");
-  if (!(clamping_min_prob > 0.0 && clamping_min_prob < 0.5)) return fail("clamping_min_prob must be in (0, 0.5)");
-  if (!(clamping_max_prob > 0.5 && clamping_max_prob < 1.0)) return fail("clamping_max_prob must be in (0.5, 1)");
-  if (!(occupancy_threshold_prob > clamping_min_prob && occupancy_threshold_prob < clamping_max_prob))
-    return fail("occupancy_threshold_prob must be in (clamping_min_prob, clamping_max_prob)");
-  if (!(std::isfinite(max_extent_m) && max_extent_m >= 0.0)) return fail("max_extent_m must be finite and >= 0");
-  if (max_update_cells < 1) return fail("max_update_cells must be >= 1");
+  }
   return true;
 }
 

@@ -25,6 +25,8 @@
 #include <cstdio>
 #include <memory>
 #include <mutex>
+#include <set>
+#include <string>
 
 #include "stereo_occupancy/DisparityMapperConfig.h"
 #include "stereo_occupancy/ros/conversions.h"
@@ -60,21 +62,11 @@ double threadCpuMs() {
 
 /// The values in use, as the dynamic_reconfigure server shows them.
 void toConfig(const DisparityMapperParameters& p, DisparityMapperConfig* config) {
-  config->algorithm = toString(p.drawing.algorithm);
-  config->sensor_profile = toString(p.drawing.sensor_model.profile);
-  config->tail_sigmas = p.drawing.sensor_model.tail_sigmas;
-  config->p_hit = p.drawing.sensor_model.p_hit;
-  config->p_free = p.drawing.sensor_model.p_free;
-  config->p_sky = p.drawing.sensor_model.p_sky;
-  config->free_gap_sigmas = p.drawing.sensor_model.free_gap_sigmas;
-  config->max_range_m = p.camera.max_range_m;
-  config->min_range_m = p.camera.min_range_m;
-  config->delta_d_px = p.camera.delta_d_px;
-  config->k_m = p.drawing.sensor_model.k_m;
-  config->p_min = p.drawing.sensor_model.p_min;
-  config->p_max = p.drawing.sensor_model.p_max;
-  config->sigma_trans_m = p.drawing.blur.sigma_trans_m;
-  config->sigma_angle_rad = p.drawing.blur.sigma_angle_rad;
+  std::set<std::string> names;  // those of the .cfg
+  for (const auto& description : DisparityMapperConfig::__getParamDescriptions__()) names.insert(description->name);
+  dynamic_reconfigure::Config msg;
+  toReconfigureMessage(p, names, &msg);
+  config->__fromMessage__(msg);
 }
 
 }  // namespace
@@ -242,41 +234,18 @@ DisparityMapper::~DisparityMapper() {
 }
 
 void DisparityMapper::reconfigure(DisparityMapperConfig& config, uint32_t /*level*/) {
-  // The server clamps each value to its range in the .cfg; cross-checks
-  // (min_range_m < max_range_m, ...) and the algorithm's name are ours. A
-  // refused request leaves the values in use, and the server shows those.
+  // The server clamps each value to its range in the .cfg (the table's);
+  // cross-checks (min_range_m < max_range_m, ...) and the choices' names are
+  // the table's too. A refused request leaves the values in use, and the
+  // server shows those.
   std::lock_guard<std::mutex> lock(mutex_);
-  const DisparityMapperParameters& params = mapping_->parameters();
-  DisparityMapperParameters next = params;
+  DisparityMapperParameters next = mapping_->parameters();
+  dynamic_reconfigure::Config msg;
+  config.__toMessage__(msg);
   std::string why;
-  if (!parseDrawingAlgorithm(config.algorithm, &next.drawing.algorithm)) {
-    NODELET_WARN("dynamic_reconfigure: algorithm must be one of %s (got '%s'); keeping the previous values",
-                 drawingAlgorithmNames().c_str(), config.algorithm.c_str());
-    toConfig(params, &config);
-    return;
-  }
-  if (!parseSensorProfile(config.sensor_profile, &next.drawing.sensor_model.profile)) {
-    NODELET_WARN("dynamic_reconfigure: sensor_profile must be gaussian or surface (got '%s'); keeping the previous "
-                 "values", config.sensor_profile.c_str());
-    toConfig(params, &config);
-    return;
-  }
-  next.drawing.sensor_model.tail_sigmas = config.tail_sigmas;
-  next.drawing.sensor_model.p_hit = config.p_hit;
-  next.drawing.sensor_model.p_free = config.p_free;
-  next.drawing.sensor_model.p_sky = config.p_sky;
-  next.drawing.sensor_model.free_gap_sigmas = config.free_gap_sigmas;
-  next.camera.max_range_m = config.max_range_m;
-  next.camera.min_range_m = config.min_range_m;
-  next.camera.delta_d_px = config.delta_d_px;
-  next.drawing.sensor_model.k_m = config.k_m;
-  next.drawing.sensor_model.p_min = config.p_min;
-  next.drawing.sensor_model.p_max = config.p_max;
-  next.drawing.blur.sigma_trans_m = config.sigma_trans_m;
-  next.drawing.blur.sigma_angle_rad = config.sigma_angle_rad;
-  if (!next.isValid(&why)) {
+  if (!fromReconfigureMessage(msg, &next, &why)) {
     NODELET_WARN("dynamic_reconfigure: %s; keeping the previous values", why.c_str());
-    toConfig(params, &config);
+    toConfig(mapping_->parameters(), &config);
     return;
   }
   mapping_->setParameters(next);

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <set>
+#include <type_traits>
 
 namespace stereo_occupancy {
 
@@ -25,28 +26,13 @@ bool isPlainFileName(const std::string& name) {
 
 bool DisparityMapperParameters::isValid(std::string* why) const {
   if (world_frame.empty()) return fail(why, "world_frame must not be empty");
-  if (!(std::isfinite(tf_timeout_s) && tf_timeout_s >= 0.0 && tf_timeout_s <= 60.0))
-    return fail(why, "tf_timeout_s must be in [0, 60]");
-  if (queue_size < 1 || queue_size > 100) return fail(why, "queue_size must be in [1, 100]");
-  if (!(std::isfinite(depth_baseline_m) && depth_baseline_m > 0.0 && depth_baseline_m <= 10.0))
-    return fail(why, "depth_baseline_m must be in (0, 10]");
-  if (!std::isfinite(cx_px) || !std::isfinite(cy_px)) return fail(why, "cx_px and cy_px must be finite");
-  if (max_image_pixels < 1) return fail(why, "max_image_pixels must be >= 1");
-  if (!(std::isfinite(camera.min_range_m) && camera.min_range_m >= 0.05 && camera.min_range_m <= 10.0))
-    return fail(why, "min_range_m must be in [0.05, 10]");
-  if (!(std::isfinite(camera.max_range_m) && camera.max_range_m > camera.min_range_m &&
-        camera.max_range_m <= 200.0))
-    return fail(why, "max_range_m must be in (min_range_m, 200]");
-  if (!(std::isfinite(camera.delta_d_px) && camera.delta_d_px >= 0.01 && camera.delta_d_px <= 5.0))
-    return fail(why, "delta_d_px must be in [0.01, 5]");
+  if (!parametersInRange(*this, why)) return false;
+  if (!(camera.max_range_m > camera.min_range_m)) return fail(why, "max_range_m must be > min_range_m");
   return drawing.isValid(why);
 }
 
 bool OctomapAccumulatorParameters::isValid(std::string* why) const {
-  if (!(std::isfinite(publish_rate_hz) && publish_rate_hz > 0.0 && publish_rate_hz <= 100.0))
-    return fail(why, "publish_rate_hz must be in (0, 100]");
-  if (!(std::isfinite(prune_period_s) && prune_period_s > 0.0)) return fail(why, "prune_period_s must be > 0");
-  if (!(std::isfinite(save_period_s) && save_period_s >= 0.0)) return fail(why, "save_period_s must be >= 0");
+  if (!parametersInRange(*this, why)) return false;
   if (!isPlainFileName(map_name))
     return fail(why, "map_name must be a plain file name: letters, digits, '_', '-', '.', not starting with '.'");
   return map.isValid(why);
@@ -54,60 +40,50 @@ bool OctomapAccumulatorParameters::isValid(std::string* why) const {
 
 namespace {
 
-/// Reads every mapper parameter through read(name, value), which leaves
-/// value unchanged when the source does not have the name.
-template <class Read>
-bool readParameters(Read&& read, DisparityMapperParameters* p, std::string* why) {
-  read("world_frame", p->world_frame);
-  read("tf_timeout_s", p->tf_timeout_s);
-  read("queue_size", p->queue_size);
-  read("use_depth", p->use_depth);
-  read("depth_baseline_m", p->depth_baseline_m);
-  read("cx_px", p->cx_px);
-  read("cy_px", p->cy_px);
-  read("max_image_pixels", p->max_image_pixels);
-  read("min_range_m", p->camera.min_range_m);
-  read("max_range_m", p->camera.max_range_m);
-  read("delta_d_px", p->camera.delta_d_px);
-  std::string algorithm = toString(p->drawing.algorithm);
-  read("algorithm", algorithm);
-  if (!parseDrawingAlgorithm(algorithm, &p->drawing.algorithm))
-    return fail(why, "algorithm must be one of " + drawingAlgorithmNames() + " (got '" + algorithm + "')");
-  read("resolution_m", p->drawing.resolution_m);
-  std::string profile = toString(p->drawing.sensor_model.profile);
-  read("sensor_profile", profile);
-  if (!parseSensorProfile(profile, &p->drawing.sensor_model.profile))
-    return fail(why, "sensor_profile must be gaussian or surface (got '" + profile + "')");
-  read("tail_sigmas", p->drawing.sensor_model.tail_sigmas);
-  read("p_hit", p->drawing.sensor_model.p_hit);
-  read("p_free", p->drawing.sensor_model.p_free);
-  read("p_sky", p->drawing.sensor_model.p_sky);
-  read("free_gap_sigmas", p->drawing.sensor_model.free_gap_sigmas);
-  read("k_m", p->drawing.sensor_model.k_m);
-  read("p_min", p->drawing.sensor_model.p_min);
-  read("p_max", p->drawing.sensor_model.p_max);
-  read("sigma_trans_m", p->drawing.blur.sigma_trans_m);
-  read("sigma_angle_rad", p->drawing.blur.sigma_angle_rad);
-  read("sigma_step_cells", p->drawing.blur.sigma_step_cells);
-  return p->isValid(why);
-}
+/// Reads parameters by the table through read(name, std::string* text) for
+/// choices and read(name, T* value) for the rest, where T is double, int,
+/// bool or std::string; each leaves the value unchanged when the source does
+/// not have the name. Names a choice it cannot parse.
+template <class Source>
+class TableReader {
+ public:
+  explicit TableReader(Source& source) : source_(source) {}
 
-template <class Read>
-bool readParameters(Read&& read, OctomapAccumulatorParameters* p, std::string* why) {
-  read("world_frame", p->world_frame);
-  read("resolution_m", p->map.resolution_m);
-  read("clamping_min_prob", p->map.clamping_min_prob);
-  read("clamping_max_prob", p->map.clamping_max_prob);
-  read("occupancy_threshold_prob", p->map.occupancy_threshold_prob);
-  read("max_extent_m", p->map.max_extent_m);
-  int max_update_cells = static_cast<int>(std::min<uint64_t>(p->map.max_update_cells, INT32_MAX));
-  read("max_update_cells", max_update_cells);
-  p->map.max_update_cells = max_update_cells > 0 ? static_cast<uint64_t>(max_update_cells) : 0;
-  read("publish_rate_hz", p->publish_rate_hz);
-  read("prune_period_s", p->prune_period_s);
-  read("save_dir", p->save_dir);
-  read("map_name", p->map_name);
-  read("save_period_s", p->save_period_s);
+  template <typename T>
+  void operator()(const ParameterSpec& spec, T& value) {
+    if constexpr (std::is_same_v<T, DrawingAlgorithm>) {
+      std::string name = toString(value);
+      source_(spec.name, &name);
+      if (!parseDrawingAlgorithm(name, &value))
+        note(std::string("algorithm must be one of ") + drawingAlgorithmNames() + " (got '" + name + "')");
+    } else if constexpr (std::is_same_v<T, SensorProfile>) {
+      std::string name = toString(value);
+      source_(spec.name, &name);
+      if (!parseSensorProfile(name, &value)) note("sensor_profile must be gaussian or surface (got '" + name + "')");
+    } else if constexpr (std::is_same_v<T, uint64_t>) {  // ROS parameters are 32-bit ints
+      int v = static_cast<int>(std::min<uint64_t>(value, INT32_MAX));
+      source_(spec.name, &v);
+      value = v > 0 ? static_cast<uint64_t>(v) : 0;
+    } else {
+      source_(spec.name, &value);
+    }
+  }
+  /// The first choice that could not be parsed; empty if none.
+  const std::string& error() const { return error_; }
+
+ private:
+  void note(const std::string& text) {
+    if (error_.empty()) error_ = text;
+  }
+  Source& source_;
+  std::string error_;
+};
+
+template <class Params, class Source>
+bool readParameters(Source& source, Params* p, std::string* why) {
+  TableReader<Source> reader(source);
+  Params::forEachParameter(*p, reader);
+  if (!reader.error().empty()) return fail(why, reader.error());
   return p->isValid(why);
 }
 
@@ -118,12 +94,12 @@ class PairReader {
   explicit PairReader(const std::map<std::string, std::string>& values) : values_(values) {}
 
   template <class T>
-  void operator()(const char* name, T& value) {
+  void operator()(const char* name, T* value) {
     asked_.insert(name);
     const auto it = values_.find(name);
     if (it == values_.end()) return;
-    T parsed = value;
-    if (parse(it->second, &parsed)) value = parsed;
+    T parsed = *value;
+    if (parse(it->second, &parsed)) *value = parsed;
     else if (error_.empty()) error_ = std::string(name) + ": cannot read '" + it->second + "'";
   }
   const std::set<std::string>& asked() const { return asked_; }
@@ -157,14 +133,80 @@ class PairReader {
   std::string error_;
 };
 
+/// Reads from the parameter server.
+struct ServerReader {
+  const ros::NodeHandle& nh;
+  template <class T>
+  void operator()(const char* name, T* value) {
+    nh.param(name, *value, *value);
+  }
+};
+
+/// Reads from a dynamic_reconfigure message.
+struct MessageReader {
+  const dynamic_reconfigure::Config& msg;
+  template <class List, class T>
+  static void find(const List& list, const char* name, T* value) {
+    for (const auto& entry : list)
+      if (entry.name == name) *value = static_cast<T>(entry.value);
+  }
+  void operator()(const char* name, double* value) const { find(msg.doubles, name, value); }
+  void operator()(const char* name, int* value) const { find(msg.ints, name, value); }
+  void operator()(const char* name, bool* value) const { find(msg.bools, name, value); }
+  void operator()(const char* name, std::string* value) const { find(msg.strs, name, value); }
+};
+
+/// Writes into a dynamic_reconfigure message the names it is asked for.
+struct MessageWriter {
+  const std::set<std::string>& names;
+  dynamic_reconfigure::Config* msg;
+  template <class Entry, class List, class T>
+  void add(List* list, const char* name, const T& value) const {
+    if (!names.count(name)) return;
+    Entry entry;
+    entry.name = name;
+    entry.value = value;
+    list->push_back(entry);
+  }
+  void operator()(const char* name, double* value) const {
+    add<dynamic_reconfigure::DoubleParameter>(&msg->doubles, name, *value);
+  }
+  void operator()(const char* name, int* value) const { add<dynamic_reconfigure::IntParameter>(&msg->ints, name, *value); }
+  void operator()(const char* name, bool* value) const {
+    add<dynamic_reconfigure::BoolParameter>(&msg->bools, name, *value);
+  }
+  void operator()(const char* name, std::string* value) const {
+    add<dynamic_reconfigure::StrParameter>(&msg->strs, name, *value);
+  }
+};
+
 }  // namespace
 
+void toReconfigureMessage(const DisparityMapperParameters& params, const std::set<std::string>& names,
+                          dynamic_reconfigure::Config* msg) {
+  DisparityMapperParameters copy = params;  // the reader visits members by reference
+  MessageWriter writer{names, msg};
+  TableReader<MessageWriter> visit(writer);
+  DisparityMapperParameters::forEachParameter(copy, visit);
+}
+
+bool fromReconfigureMessage(const dynamic_reconfigure::Config& msg, DisparityMapperParameters* params,
+                            std::string* why) {
+  DisparityMapperParameters next = *params;
+  MessageReader source{msg};
+  if (!readParameters(source, &next, why)) return false;
+  *params = next;
+  return true;
+}
+
 bool loadParameters(const ros::NodeHandle& nh, DisparityMapperParameters* p, std::string* why) {
-  return readParameters([&](const char* name, auto& value) { nh.param(name, value, value); }, p, why);
+  ServerReader source{nh};
+  return readParameters(source, p, why);
 }
 
 bool loadParameters(const ros::NodeHandle& nh, OctomapAccumulatorParameters* p, std::string* why) {
-  return readParameters([&](const char* name, auto& value) { nh.param(name, value, value); }, p, why);
+  ServerReader source{nh};
+  return readParameters(source, p, why);
 }
 
 bool loadParameters(const std::map<std::string, std::string>& values, DisparityMapperParameters* mapper,

@@ -213,13 +213,22 @@ TEST(DistanceDependentBlur, RowThroughTheCameraEqualsThePlainBlur) {
 
 // An absurd σ (found by the fuzzer: σ_trans of 1e25 m) gives a capped
 // padding, not an int overflow, and the drawer refuses the grid it would need.
+// The table refuses an absurd σ; a blur built without that check still caps
+// its padding, and the largest valid σ pads a frustum box the drawer refuses
+// by its cell count instead of allocating it.
 TEST(DistanceDependentBlur, AbsurdSigmaCapsThePadding) {
   BlurConfig cfg;
   cfg.sigma_trans_m = 1e25;
-  ASSERT_TRUE(cfg.isValid());
+  std::string why;
+  EXPECT_FALSE(cfg.isValid(&why));
+  EXPECT_EQ(why.rfind("sigma_trans_m must be in [0, 10]", 0), 0u) << why;
   EXPECT_EQ(DistanceDependentBlur(cfg).paddingCells(25.0, 0.25), DistanceDependentBlur::kMaxPaddingCells);
   DrawingConfig drawing;
   drawing.blur = cfg;
+  EXPECT_THROW(DisparityDrawer(StereoCameraConfig{}, drawing), std::invalid_argument);
+  drawing.blur.sigma_trans_m = 10.0;
+  drawing.blur.sigma_angle_rad = 0.5;
+  drawing.max_grid_cells = 1u << 20;
   DisparityDrawer drawer(StereoCameraConfig{}, drawing);
   LocalGrid grid;
   EXPECT_THROW(drawer.prepareGrid(Eigen::Isometry3d::Identity(), &grid), std::invalid_argument);

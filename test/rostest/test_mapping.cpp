@@ -332,11 +332,11 @@ TEST_F(MappingTest, DepthInputReconfigureAndInvalidParameters) {
     for (const auto& d : srv.response.config.doubles) shown[d.name] = d.value;
     return shown;
   };
-  EXPECT_DOUBLE_EQ(reconfigureDouble({{"k_m", 50.0}})["k_m"], 1.0);
+  EXPECT_DOUBLE_EQ(reconfigureDouble({{"k_m", 50.0}})["k_m"], 10.0);  // clamped to the table's maximum
   // Each in range, together invalid (min_range_m >= max_range_m): refused,
   // and the server shows the values still in use.
   std::map<std::string, double> shown = reconfigureDouble({{"k_m", 0.05}, {"min_range_m", 9.0}, {"max_range_m", 5.0}});
-  EXPECT_DOUBLE_EQ(shown["k_m"], 1.0);
+  EXPECT_DOUBLE_EQ(shown["k_m"], 10.0);
   EXPECT_DOUBLE_EQ(shown["min_range_m"], 0.5);
   EXPECT_DOUBLE_EQ(shown["max_range_m"], 25.0);
   // An unknown algorithm: refused likewise.

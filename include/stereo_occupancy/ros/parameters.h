@@ -3,9 +3,11 @@
 /// The one place that reads the parameter server: one struct per nodelet,
 /// built from core config structs, validated on load.
 
+#include <dynamic_reconfigure/Config.h>
 #include <ros/node_handle.h>
 
 #include <map>
+#include <set>
 #include <string>
 
 #include "stereo_occupancy/disparity_drawer.h"
@@ -37,6 +39,29 @@ struct DisparityMapperParameters {
     return d;
   }
 
+  /// The parameters (stereo_occupancy/parameter_table.h): f(spec, member)
+  /// for each, the drawing's included.
+  template <typename Self, typename F>
+  static void forEachParameter(Self& p, F&& f) {
+    f(textParameter("world_frame", "REP-105 world-fixed frame the grid is aligned with"), p.world_frame);
+    f(numberParameter("max_range_m", "m", 1.0, 200.0, "sensor range limit along the ray; > min_range_m"),
+      p.camera.max_range_m);
+    f(numberParameter("min_range_m", "m", 0.05, 10.0, "nearer measurements are invalid"), p.camera.min_range_m);
+    f(numberParameter("delta_d_px", "px", 0.01, 5.0, "disparity uncertainty (eq. 4); at least the message's delta_d"),
+      p.camera.delta_d_px);
+    DrawingConfig::forEachParameter(p.drawing, f);
+    f(numberParameter("tf_timeout_s", "s", 0.0, 60.0, "an image whose pose comes later than this is dropped; 0: never"),
+      p.tf_timeout_s);
+    f(numberParameter("queue_size", "images", 1.0, 100.0, "images waiting for their pose; the oldest is dropped"),
+      p.queue_size);
+    f(textParameter("use_depth", "subscribe depth + camera_info instead of disparity"), p.use_depth);
+    f(numberParameter("depth_baseline_m", "m", 0.001, 10.0, "baseline of a depth camera (eq. 4)"), p.depth_baseline_m);
+    f(numberParameter("cx_px", "px", -1.0, 100000.0, "principal point without camera_info; -1: image centre"), p.cx_px);
+    f(numberParameter("cy_px", "px", -1.0, 100000.0, "principal point without camera_info; -1: image centre"), p.cy_px);
+    f(numberParameter("max_image_pixels", "px", 1.0, 2147483647.0, "larger images are refused"), p.max_image_pixels);
+  }
+
+  /// The ranges of forEachParameter(), a world frame, max_range_m > min_range_m, a valid drawing.
   bool isValid(std::string* why) const;
 };
 
@@ -51,6 +76,24 @@ struct OctomapAccumulatorParameters {
   std::string map_name = "stereo_occupancy_map";  ///< file base name in save_dir
   double save_period_s = 0.0;    ///< also save every this many seconds when the map changed; 0: only on request/shutdown
 
+  /// The parameters (stereo_occupancy/parameter_table.h): f(spec, member) for each, the map's included.
+  template <typename Self, typename F>
+  static void forEachParameter(Self& p, F&& f) {
+    f(textParameter("world_frame", "the map's frame; updates in another are refused; empty: the first update's"),
+      p.world_frame);
+    MapAccumulatorConfig::forEachParameter(p.map, f);
+    f(numberParameter("publish_rate_hz", "Hz", 0.01, 100.0, "rate of the map outputs, while subscribed"),
+      p.publish_rate_hz);
+    f(numberParameter("prune_period_s", "s", 0.1, 86400.0, "how often cells beyond max_extent_m are dropped"),
+      p.prune_period_s);
+    f(textParameter("save_dir", "where ~save_map writes, and the map is saved on shutdown; empty: nowhere"),
+      p.save_dir);
+    f(textParameter("map_name", "file base name in save_dir: a plain name"), p.map_name);
+    f(numberParameter("save_period_s", "s", 0.0, 86400.0, "also save this often while the map changes; 0: never"),
+      p.save_period_s);
+  }
+
+  /// The ranges of forEachParameter(), a plain map_name, a valid map config.
   bool isValid(std::string* why) const;
 };
 
@@ -65,5 +108,15 @@ bool loadParameters(const ros::NodeHandle& private_nh, OctomapAccumulatorParamet
 /// Unknown names and unreadable values are errors.
 bool loadParameters(const std::map<std::string, std::string>& values, DisparityMapperParameters* mapper,
                     OctomapAccumulatorParameters* accumulator, std::string* why);
+
+/// The parameters named in @p names as a dynamic_reconfigure message (what
+/// the server shows), by the table: choices as strings.
+void toReconfigureMessage(const DisparityMapperParameters& params, const std::set<std::string>& names,
+                          dynamic_reconfigure::Config* msg);
+
+/// @p params with the values a dynamic_reconfigure message holds (others
+/// keep theirs), validated; false, @p params unchanged, with the reason.
+bool fromReconfigureMessage(const dynamic_reconfigure::Config& msg, DisparityMapperParameters* params,
+                            std::string* why);
 
 }  // namespace stereo_occupancy
