@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -82,6 +83,37 @@ class DistanceDependentBlur {
   void crossPass(int axis, const LocalGrid& grid, const std::vector<Extent>& in_extent, const float* in,
                  const std::vector<Extent>& out_extent, float* out) const;
   const float* weights(int q) const { return &weights_[static_cast<size_t>(q) * (2 * radius_ + 1)]; }
+
+  /// The rounded σ of a cell at squared distance r2 from the camera, in
+  /// steps of sigma_step_cells (eq. 17), at most kMaxSigmaIndex.
+  struct SigmaIndex {
+    static constexpr int kMaxSigmaIndex = 255;  ///< σ of 255 steps: beyond any padding the drawer allows
+    double trans2;    ///< σ_trans² [m²]
+    double angle2;    ///< σ_angle² [rad²]
+    double to_steps;  ///< 1 / (c · sigma_step_cells) [1/m]
+    int operator()(double r2) const;
+  };
+  /// Squared distances of the cell centres from the camera, per axis and index [m²].
+  struct CameraDistances {
+    std::array<std::vector<double>, 3> squares;
+    double r2_max = 0.0;  ///< at the box corner farthest from the camera
+  };
+
+  // apply()'s steps, in order.
+  /// extent_[0]: each row's cells with a non-zero value; false if there are none.
+  bool findInputExtents(const LocalGrid& grid);
+  static CameraDistances cameraDistances(const LocalGrid& grid, const Eigen::Vector3d& W_camera);
+  /// weights_ and radius_ for the rounded σ 0 .. q_max.
+  void prepareWeights(int q_max);
+  /// extent_[1..3]: where each pass's output can be non-zero.
+  void growExtents(const LocalGrid& grid);
+  /// runs_ and row_runs_: the cells of each row that share a kernel.
+  void findKernelRuns(const LocalGrid& grid, const Eigen::Vector3d& W_camera, const CameraDistances& distances,
+                      const SigmaIndex& sigma_index, int q_max);
+  /// The pass along x, from the grid into buffer_b_.
+  void passAlongX(const LocalGrid& grid);
+  /// The result, buffer_b_, into the grid.
+  void writeBack(LocalGrid* grid) const;
 
   BlurConfig config_;
   std::vector<std::vector<float>> kernels_;

@@ -79,55 +79,76 @@ void DistanceDependentBlur::crossPass(int axis, const LocalGrid& grid, const std
   }
 }
 
+namespace {
+
+/// Unknown cells enter the blur as log-odds 0.
+float knownValue(float v) { return v == LocalGrid::kUnknown ? 0.0f : v; }
+
+}  // namespace
+
+int DistanceDependentBlur::SigmaIndex::operator()(double r2) const {
+  const double steps = std::sqrt(trans2 + r2 * angle2) * to_steps;  // eq. 17, in sigma_step_cells steps
+  return steps >= kMaxSigmaIndex ? kMaxSigmaIndex : static_cast<int>(steps + 0.5);  // round half up, as lround
+}
+
 void DistanceDependentBlur::apply(const Eigen::Vector3d& W_camera, LocalGrid* grid) {
   if (!config_.enabled()) return;
   // Most of a frustum's box is unknown: the passes visit only each row's
   // extent of non-zero values (grown by the kernel radius per pass), and
   // within a row, runs of cells that share one kernel. Each cell's sum adds
   // its taps in the order of a plain per-cell convolution.
-  const int nx = grid->size().x(), ny = grid->size().y(), nz = grid->size().z();
-  const int rows = ny * nz;
-  float* data = grid->data();
-  auto known = [](float v) { return v == LocalGrid::kUnknown ? 0.0f : v; };  // unknown enters as 0
+  if (!findInputExtents(*grid)) return;  // all zero or unknown: the blur changes nothing
+  const CameraDistances distances = cameraDistances(*grid, W_camera);
+  const double c = grid->resolution();
+  const SigmaIndex sigma_index{config_.sigma_trans_m * config_.sigma_trans_m,
+                               config_.sigma_angle_rad * config_.sigma_angle_rad,
+                               1.0 / (c * config_.sigma_step_cells)};
+  const int q_max = sigma_index(distances.r2_max);
+  prepareWeights(q_max);
+  growExtents(*grid);
+  findKernelRuns(*grid, W_camera, distances, sigma_index, q_max);
+  passAlongX(*grid);
+  crossPass(1, *grid, extent_[1], buffer_b_.data(), extent_[2], buffer_a_.data());
+  crossPass(2, *grid, extent_[2], buffer_a_.data(), extent_[3], buffer_b_.data());
+  writeBack(grid);
+}
 
+bool DistanceDependentBlur::findInputExtents(const LocalGrid& grid) {
+  const int nx = grid.size().x(), rows = grid.size().y() * grid.size().z();
   std::vector<Extent>& e0 = extent_[0];
   e0.assign(rows, Extent{});
   bool any = false;
   for (int r = 0; r < rows; ++r) {
-    const float* row = data + static_cast<int64_t>(nx) * r;
+    const float* row = grid.data() + static_cast<int64_t>(nx) * r;
     int lo = 0;
     while (lo + kInformationBlock <= nx && !blockHasInformation(row + lo)) lo += kInformationBlock;
-    while (lo < nx && known(row[lo]) == 0.0f) ++lo;
+    while (lo < nx && knownValue(row[lo]) == 0.0f) ++lo;
     if (lo == nx) continue;
     int hi = nx;
     while (hi - kInformationBlock >= lo && !blockHasInformation(row + hi - kInformationBlock)) hi -= kInformationBlock;
-    while (hi > lo && known(row[hi - 1]) == 0.0f) --hi;
+    while (hi > lo && knownValue(row[hi - 1]) == 0.0f) --hi;
     e0[r] = Extent{lo, hi};
     any = true;
   }
-  if (!any) return;  // all zero or unknown: the blur changes nothing
+  return any;
+}
 
-  // Rounded σ per cell (eq. 17: σ² = σ_trans² + (r·σ_angle)², r² summed per
-  // axis); largest at the box corner farthest from the camera.
-  const double c = grid->resolution();
-  std::array<std::vector<double>, 3> squares;  // (cell centre - camera)² per axis and index
-  double r2_max = 0.0;
+DistanceDependentBlur::CameraDistances DistanceDependentBlur::cameraDistances(const LocalGrid& grid,
+                                                                             const Eigen::Vector3d& W_camera) {
+  // r² = the sum of the per-axis squares; largest at the box corner farthest from the camera.
+  CameraDistances d;
   for (int a = 0; a < 3; ++a) {
-    squares[a].resize(grid->size()[a]);
-    for (int i = 0; i < grid->size()[a]; ++i) {
-      const double d = (grid->originIndex()[a] + i + 0.5) * c - W_camera[a];
-      squares[a][i] = d * d;
+    d.squares[a].resize(grid.size()[a]);
+    for (int i = 0; i < grid.size()[a]; ++i) {
+      const double offset = (grid.originIndex()[a] + i + 0.5) * grid.resolution() - W_camera[a];
+      d.squares[a][i] = offset * offset;
     }
-    r2_max += std::max(squares[a].front(), squares[a].back());
+    d.r2_max += std::max(d.squares[a].front(), d.squares[a].back());
   }
-  const double trans2 = config_.sigma_trans_m * config_.sigma_trans_m;
-  const double angle2 = config_.sigma_angle_rad * config_.sigma_angle_rad;
-  const double to_steps = 1.0 / (c * config_.sigma_step_cells);
-  auto sigmaIndex = [&](double r2) {
-    const double steps = std::sqrt(trans2 + r2 * angle2) * to_steps;
-    return steps >= 255.0 ? 255 : static_cast<int>(steps + 0.5);  // round half up, as lround for >= 0
-  };
-  const int q_max = sigmaIndex(r2_max);
+  return d;
+}
+
+void DistanceDependentBlur::prepareWeights(int q_max) {
   radius_ = static_cast<int>(kernel(q_max).size() / 2);  // radii grow with σ
   const int taps = 2 * radius_ + 1;
   weights_.assign(static_cast<size_t>(q_max + 1) * taps, 0.0f);
@@ -136,12 +157,16 @@ void DistanceDependentBlur::apply(const Eigen::Vector3d& W_camera, LocalGrid* gr
     const int r = static_cast<int>(k.size() / 2);
     std::copy(k.begin(), k.end(), weights_.begin() + static_cast<int64_t>(q) * taps + radius_ - r);
   }
+}
 
-  // Where each pass's output can be non-zero: grown by the radius along its axis.
-  std::vector<Extent>&e1 = extent_[1], &e2 = extent_[2], &e3 = extent_[3];
+void DistanceDependentBlur::growExtents(const LocalGrid& grid) {
+  const int nx = grid.size().x(), ny = grid.size().y(), nz = grid.size().z(), rows = ny * nz;
+  const std::vector<Extent>& e0 = extent_[0];
+  std::vector<Extent>& e1 = extent_[1];
   e1.assign(rows, Extent{});
   for (int r = 0; r < rows; ++r)
     if (!e0[r].empty()) e1[r] = Extent{std::max(0, e0[r].lo - radius_), std::min(nx, e0[r].hi + radius_)};
+  // Along y and z: the hull of the rows within the radius.
   auto grow = [&](const std::vector<Extent>& in, int axis, std::vector<Extent>* out) {
     out->assign(rows, Extent{});
     const int n = axis == 1 ? ny : nz;
@@ -159,45 +184,50 @@ void DistanceDependentBlur::apply(const Eigen::Vector3d& W_camera, LocalGrid* gr
         (*out)[r] = hull;
       }
   };
-  grow(e1, 1, &e2);
-  grow(e2, 2, &e3);
+  grow(extent_[1], 1, &extent_[2]);
+  grow(extent_[2], 2, &extent_[3]);
+}
 
+void DistanceDependentBlur::findKernelRuns(const LocalGrid& grid, const Eigen::Vector3d& W_camera,
+                                           const CameraDistances& distances, const SigmaIndex& sigma_index,
+                                           int q_max) {
   // Runs of one kernel over each row's final extent (which holds the others).
   // q grows with r², and along a row r² falls up to the camera's x and grows
   // after it: the runs' ends are found by bisection against the smallest r²
   // of each q (itself bisected over the doubles, so q is exactly
-  // sigmaIndex(r²)), without a square root per cell.
+  // sigma_index(r²)), without a square root per cell.
   thresholds_.assign(q_max + 1, 0.0);
   for (int q = 1; q <= q_max; ++q) {
-    double lo = 0.0, hi = r2_max;  // sigmaIndex(hi) >= q
-    if (sigmaIndex(lo) >= q) {
+    double lo = 0.0, hi = distances.r2_max;  // sigma_index(hi) >= q
+    if (sigma_index(lo) >= q) {
       hi = lo;
     } else {
       for (;;) {
         const double mid = lo + 0.5 * (hi - lo);
         if (!(mid > lo && mid < hi)) break;  // adjacent doubles
-        (sigmaIndex(mid) >= q ? hi : lo) = mid;
+        (sigma_index(mid) >= q ? hi : lo) = mid;
       }
     }
     thresholds_[q] = hi;
   }
   auto qAt = [&](int x, double yz2) {
-    const double r2 = squares[0][x] + yz2;
+    const double r2 = distances.squares[0][x] + yz2;
     int q = 0;
     while (q < q_max && r2 >= thresholds_[q + 1]) ++q;
     return q;
   };
+  const int nx = grid.size().x(), ny = grid.size().y(), nz = grid.size().z(), rows = ny * nz;
   // First x whose cell centre is not behind the camera's x: r² falls before it.
   int x_turn = 0;
-  while (x_turn < nx && (grid->originIndex().x() + x_turn + 0.5) * c - W_camera.x() < 0.0) ++x_turn;
+  while (x_turn < nx && (grid.originIndex().x() + x_turn + 0.5) * grid.resolution() - W_camera.x() < 0.0) ++x_turn;
   runs_.clear();
   row_runs_.assign(rows + 1, 0);
   for (int z = 0; z < nz; ++z)
     for (int y = 0; y < ny; ++y) {
       const int r = y + ny * z;
       row_runs_[r] = static_cast<uint32_t>(runs_.size());
-      const double yz2 = squares[1][y] + squares[2][z];
-      const int lo = e3[r].lo, hi = e3[r].hi;
+      const double yz2 = distances.squares[1][y] + distances.squares[2][z];
+      const int lo = extent_[3][r].lo, hi = extent_[3][r].hi;
       const int turn = std::clamp(x_turn, lo, hi);
       for (const auto& [begin, end] : {std::make_pair(lo, turn), std::make_pair(turn, hi)}) {
         for (int x = begin; x < end;) {  // q is monotonic on [begin, end)
@@ -217,21 +247,23 @@ void DistanceDependentBlur::apply(const Eigen::Vector3d& W_camera, LocalGrid* gr
       }
     }
   row_runs_[rows] = static_cast<uint32_t>(runs_.size());
+}
 
-  const size_t cells = grid->numCells();
+void DistanceDependentBlur::passAlongX(const LocalGrid& grid) {
+  const int nx = grid.size().x(), rows = grid.size().y() * grid.size().z();
+  const size_t cells = grid.numCells();
   releaseIfOversized(&buffer_a_, cells);
   releaseIfOversized(&buffer_b_, cells);
   buffer_a_.resize(cells);  // holds values only within the extents
   buffer_b_.resize(cells);
   scratch_.resize(nx);
-
-  // Along x: the row, unknown as 0, into a scratch line first.
+  // The row, unknown as 0, into a scratch line first.
   for (int r = 0; r < rows; ++r) {
-    const Extent& e = e1[r];
+    const Extent& e = extent_[1][r];
     if (e.empty()) continue;
-    const float* row = data + static_cast<int64_t>(nx) * r;
+    const float* row = grid.data() + static_cast<int64_t>(nx) * r;
     const int read_lo = std::max(0, e.lo - radius_), read_hi = std::min(nx, e.hi + radius_);
-    for (int x = read_lo; x < read_hi; ++x) scratch_[x] = known(row[x]);
+    for (int x = read_lo; x < read_hi; ++x) scratch_[x] = knownValue(row[x]);
     float* o = buffer_b_.data() + static_cast<int64_t>(nx) * r;
     std::fill(o + e.lo, o + e.hi, 0.0f);
     for (uint32_t k = row_runs_[r]; k < row_runs_[r + 1]; ++k) {
@@ -246,14 +278,15 @@ void DistanceDependentBlur::apply(const Eigen::Vector3d& W_camera, LocalGrid* gr
       }
     }
   }
-  crossPass(1, *grid, e1, buffer_b_.data(), e2, buffer_a_.data());
-  crossPass(2, *grid, e2, buffer_a_.data(), e3, buffer_b_.data());
+}
 
+void DistanceDependentBlur::writeBack(LocalGrid* grid) const {
   // Unknown cells stay unknown unless the blur gave them a value.
+  const int nx = grid->size().x(), rows = grid->size().y() * grid->size().z();
   for (int r = 0; r < rows; ++r) {
-    float* row = data + static_cast<int64_t>(nx) * r;
+    float* row = grid->data() + static_cast<int64_t>(nx) * r;
     const float* b = buffer_b_.data() + static_cast<int64_t>(nx) * r;
-    for (int x = e3[r].lo; x < e3[r].hi; ++x)
+    for (int x = extent_[3][r].lo; x < extent_[3][r].hi; ++x)
       if (row[x] != LocalGrid::kUnknown || b[x] != 0.0f) row[x] = b[x];
   }
 }

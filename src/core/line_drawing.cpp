@@ -10,16 +10,59 @@
 
 #include "stereo_occupancy/integer_math.h"
 
+// drawRay()'s steps run once per line, 10^5 lines an image: inlined into it,
+// as one function they were (a call each costs about 4 % of line drawing).
+#if defined(__GNUC__)
+#define STEREO_OCCUPANCY_INLINE inline __attribute__((always_inline))
+#else
+#define STEREO_OCCUPANCY_INLINE inline
+#endif
+
 namespace stereo_occupancy {
 
 namespace {
 
-/// Where a line's free run stands: cell k's minor coordinates in 32.32 fixed
-/// point and its index along the major axis, and their steps per slab.
-struct FreeRun {
-  int64_t pa, pb, idx_m;
-  int64_t dta, dtb, didx_m;
-  int64_t sa, sb;  ///< index strides of the minor axes
+/// Where a line's walk over the inner slabs stands: the current cell's minor
+/// coordinates a and b in 32.32 fixed point (exact sums, floor by shift) and
+/// its index part along the major axis, their steps per slab, and the index
+/// strides of the minor axes.
+struct LineCursor {
+  int64_t pos_a, pos_b, index_major;
+  int64_t step_a, step_b, step_index_major;
+  int64_t stride_a, stride_b;
+
+  int64_t index() const { return index_major + (pos_a >> 32) * stride_a + (pos_b >> 32) * stride_b; }
+  void advance() {
+    pos_a += step_a;
+    pos_b += step_b;
+    index_major += step_index_major;
+  }
+};
+
+/// 2^32: one cell in LineCursor's fixed point.
+constexpr double kFixedPointOne = 4294967296.0;
+
+/// Obstacle priority (section V-A, step 2b): a cell keeps the larger value.
+inline void drawCell(float* data, int64_t index, float value) {
+  float& cell = data[index];
+  cell = std::max(cell, value);
+}
+
+/// A line's walk through the grid: one cell per slab of the major axis (a 3D
+/// Bresenham line); in each slab the cell is the one where the ray crosses
+/// the slab's centre plane, and the ray's range there is the cell's. Ranges
+/// t are in cells along the ray.
+struct LineWalk {
+  int major = 0, minor_a = 1, minor_b = 2;  ///< axes
+  int first_slab = 0;   ///< index along the major axis of the first slab
+  int slabs = 0;        ///< slabs crossed, both ends included
+  int step = 1;         ///< +1 or -1 along the major axis
+  double t_begin = 0.0, t_end = 0.0;  ///< the segment drawn
+  double t_first = 0.0;  ///< at the first slab's centre plane; |t_first - t_begin| <= dt / 2
+  double dt = 0.0;       ///< from one slab's centre plane to the next
+  /// Both ends inside the grid (the usual case: the grid covers the
+  /// frustum), so the whole segment is and no index needs a check.
+  bool inside = true;
 };
 
 #if STEREO_OCCUPANCY_X86_64_SIMD
@@ -29,14 +72,14 @@ struct FreeRun {
 /// coordinates and strides fit 32 bits, as _mm_mul_epu32 needs), then a
 /// max-store per cell (there is no scatter). Returns the first k not drawn
 /// and leaves @p r at it.
-int freeRunSse2(float* data, int k, int k_end, float free_value, FreeRun* r) {
+int freeRunSse2(float* data, int k, int k_end, float free_value, LineCursor* r) {
   if (k + 1 >= k_end) return k;
-  const __m128i two_dta = _mm_set1_epi64x(2 * r->dta), two_dtb = _mm_set1_epi64x(2 * r->dtb);
-  const __m128i two_didx_m = _mm_set1_epi64x(2 * r->didx_m);
-  const __m128i vsa = _mm_set1_epi64x(r->sa), vsb = _mm_set1_epi64x(r->sb);
-  __m128i va = _mm_set_epi64x(r->pa + r->dta, r->pa);  // lane 0: cell k, lane 1: cell k + 1
-  __m128i vb = _mm_set_epi64x(r->pb + r->dtb, r->pb);
-  __m128i vm = _mm_set_epi64x(r->idx_m + r->didx_m, r->idx_m);
+  const __m128i two_dta = _mm_set1_epi64x(2 * r->step_a), two_dtb = _mm_set1_epi64x(2 * r->step_b);
+  const __m128i two_didx_m = _mm_set1_epi64x(2 * r->step_index_major);
+  const __m128i vsa = _mm_set1_epi64x(r->stride_a), vsb = _mm_set1_epi64x(r->stride_b);
+  __m128i va = _mm_set_epi64x(r->pos_a + r->step_a, r->pos_a);  // lane 0: cell k, lane 1: cell k + 1
+  __m128i vb = _mm_set_epi64x(r->pos_b + r->step_b, r->pos_b);
+  __m128i vm = _mm_set_epi64x(r->index_major + r->step_index_major, r->index_major);
   for (; k + 1 < k_end; k += 2) {
     // The high halves (the cell coordinates) moved to the low ones, which _mm_mul_epu32 multiplies.
     const __m128i ca = _mm_shuffle_epi32(va, _MM_SHUFFLE(3, 3, 1, 1));
@@ -50,9 +93,9 @@ int freeRunSse2(float* data, int k, int k_end, float free_value, FreeRun* r) {
     vb = _mm_add_epi64(vb, two_dtb);
     vm = _mm_add_epi64(vm, two_didx_m);
   }
-  r->pa = _mm_cvtsi128_si64(va);
-  r->pb = _mm_cvtsi128_si64(vb);
-  r->idx_m = _mm_cvtsi128_si64(vm);
+  r->pos_a = _mm_cvtsi128_si64(va);
+  r->pos_b = _mm_cvtsi128_si64(vb);
+  r->index_major = _mm_cvtsi128_si64(vm);
   return k;
 }
 #endif
@@ -96,142 +139,173 @@ LineDrawer::RayGrid LineDrawer::rayGrid(const Eigen::Vector3d& W_origin, LocalGr
   return g;
 }
 
-uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vector3d& W_dir,
-                             const RangeProfile& profile, LocalGrid* grid, double l_begin, double l_stop) const {
+uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vector3d& W_dir, const RangeProfile& profile,
+                             LocalGrid* grid, double l_begin, double l_stop) const {
   return drawRay(rayGrid(W_origin, grid), W_dir, profile, l_begin, l_stop);
 }
 
+namespace {
+
+/// The walk of the segment [t_begin, t_end] of the ray g.g0 + t·W_dir (t in cells).
+template <class Grid>
+STEREO_OCCUPANCY_INLINE LineWalk walkOf(const Grid& g, const Eigen::Vector3d& W_dir, double t_begin, double t_end) {
+  LineWalk w;
+  w.t_begin = t_begin;
+  w.t_end = t_end;
+  const double abs_dir[3] = {std::abs(W_dir[0]), std::abs(W_dir[1]), std::abs(W_dir[2])};
+  w.major = abs_dir[1] > abs_dir[0] ? 1 : 0;  // the first of the largest, as Eigen's maxCoeff
+  if (abs_dir[2] > abs_dir[w.major]) w.major = 2;
+  static constexpr int kNextAxis[3] = {1, 2, 0};
+  w.minor_a = kNextAxis[w.major];
+  w.minor_b = kNextAxis[w.minor_a];
+  double begin[3], end[3];
+  for (int i = 0; i < 3; ++i) {
+    begin[i] = g.g0[i] + W_dir[i] * t_begin;
+    end[i] = g.g0[i] + W_dir[i] * t_end;
+    w.inside &= (std::min(begin[i], end[i]) >= Grid::kMargin) & (std::max(begin[i], end[i]) < g.upper[i]);
+  }
+  w.first_slab = floorToInt(begin[w.major]);
+  const int last_slab = floorToInt(end[w.major]);
+  w.step = W_dir[w.major] > 0.0 ? 1 : -1;
+  w.slabs = std::abs(last_slab - w.first_slab) + 1;
+  w.dt = 1.0 / abs_dir[w.major];
+  w.t_first = (w.first_slab + 0.5 - g.g0[w.major]) / W_dir[w.major];
+  return w;
+}
+
+/// The first or the last slab, only partly on the segment: the cell of the
+/// segment's point nearest to the slab's centre plane (at t), skipped
+/// outside the grid (only when the grid does not cover the segment).
+/// Returns the cells written (0 or 1).
+template <class Grid>
+STEREO_OCCUPANCY_INLINE uint64_t drawEndCell(const Grid& g, const Eigen::Vector3d& W_dir, const LineWalk& w,
+                                             const RangeProfile& profile, int slab, double t) {
+  t = std::clamp(t, w.t_begin, w.t_end);
+  const int cell_a = floorToInt(g.g0[w.minor_a] + W_dir[w.minor_a] * t);
+  const int cell_b = floorToInt(g.g0[w.minor_b] + W_dir[w.minor_b] * t);
+  if (!w.inside && (slab < 0 || slab >= g.size[w.major] || cell_a < 0 || cell_a >= g.size[w.minor_a] || cell_b < 0 ||
+                    cell_b >= g.size[w.minor_b]))
+    return 0;
+  drawCell(g.data, slab * g.stride[w.major] + cell_a * g.stride[w.minor_a] + cell_b * g.stride[w.minor_b],
+           profile.at(static_cast<float>(t * g.c)));
+  return 1;
+}
+
+/// The cursor at the second slab, the first inner one.
+template <class Grid>
+STEREO_OCCUPANCY_INLINE LineCursor innerCursor(const Grid& g, const Eigen::Vector3d& W_dir, const LineWalk& w) {
+  const double t = w.t_first + w.dt;
+  LineCursor cursor;
+  cursor.pos_a = roundToInt64((g.g0[w.minor_a] + W_dir[w.minor_a] * t) * kFixedPointOne);
+  cursor.pos_b = roundToInt64((g.g0[w.minor_b] + W_dir[w.minor_b] * t) * kFixedPointOne);
+  cursor.index_major = static_cast<int64_t>(w.first_slab + w.step) * g.stride[w.major];
+  cursor.step_a = roundToInt64(W_dir[w.minor_a] * w.dt * kFixedPointOne);
+  cursor.step_b = roundToInt64(W_dir[w.minor_b] * w.dt * kFixedPointOne);
+  cursor.step_index_major = w.step * g.stride[w.major];
+  cursor.stride_a = g.stride[w.minor_a];
+  cursor.stride_b = g.stride[w.minor_b];
+  return cursor;
+}
+
+/// The inner slabs k = 1 .. slabs - 2 in float: their ranges and the first
+/// k whose range reaches the measurement's offset u (l = l_p + u).
+struct InnerSlabs {
+  float t1;     ///< range at slab 1 [cells]
+  float dt;     ///< per slab [cells]
+  float c;      ///< cell size [m]
+  float inv_c;  ///< [1/m]
+  int last;     ///< slabs - 1: the end slab, not inner
+
+  /// The first inner k with t_k >= (l_p + u) / c, or last if none (l_p = inf: free space).
+  int firstReaching(const RangeProfile& profile, float u) const {
+    const float steps = ((profile.l_p_m + u) * inv_c - t1) / dt;
+    if (!(steps > 0.0f)) return 1;
+    if (steps > static_cast<float>(last)) return last;
+    return std::min(last, 1 + ceilToInt(steps));
+  }
+  /// Range of inner slab k [m].
+  float rangeAt(int k) const { return (t1 + (k - 1) * dt) * c; }
+};
+
+/// The inner slabs of a line inside the grid; returns the cells written.
+STEREO_OCCUPANCY_INLINE uint64_t drawInnerCells(float* data, const InnerSlabs& inner, const RangeProfile& profile,
+                                                SimdLevel simd, LineCursor* cursor) {
+  // Four runs, by the offset u = l - l_p at the cells' centre planes: free
+  // (u < front), rising (u < -c/2), peak (|u| <= c/2), falling (u > c/2).
+  // Free and peak cells share one value; in the rising and falling runs the
+  // table position moves by a constant step.
+  const bool measures = profile.l_p_m < std::numeric_limits<float>::infinity();
+  const int k_free = measures ? inner.firstReaching(profile, profile.front_m) : inner.last;
+  const float free_value = profile.free_log_odds;  // a local: stores to the grid cannot change it
+  int k = 1;
+  // The free run, most of the cells drawn, two cells at a time where it can.
+#if STEREO_OCCUPANCY_X86_64_SIMD
+  if (simd == SimdLevel::kSse2 && cursor->stride_a <= 0xffffffffLL && cursor->stride_b <= 0xffffffffLL)
+    k = freeRunSse2(data, k, k_free, free_value, cursor);
+#else
+  static_cast<void>(simd);  // one level off x86-64
+#endif
+  for (; k < k_free; ++k, cursor->advance()) drawCell(data, cursor->index(), free_value);
+  if (k < inner.last) {  // the measurement's window reaches the inner slabs
+    const float half_cell = profile.half_cell_m;
+    const int k_peak = inner.firstReaching(profile, -half_cell), k_fall = inner.firstReaching(profile, half_cell);
+    const float sample_step = inner.dt * inner.c * profile.samples_per_m;
+    constexpr float kLastSample =
+        (LogOddsTable::kFrontSigmas + LogOddsTable::kTailSigmas) * LogOddsTable::kSamplesPerSigma;
+    auto sampleAt = [&](int slab, float shift_m) {  // table position of inner slab's cell
+      return (inner.rangeAt(slab) - profile.l_p_m + shift_m - profile.row_origin_m) * profile.samples_per_m;
+    };
+    float x = sampleAt(k, half_cell);
+    for (; k < k_peak; ++k, x += sample_step, cursor->advance())
+      drawCell(data, cursor->index(), profile.sample(std::max(x, 0.0f)));
+    const float peak = profile.sample((-profile.row_origin_m) * profile.samples_per_m);
+    for (; k < k_fall; ++k, cursor->advance()) drawCell(data, cursor->index(), peak);
+    x = sampleAt(k, -half_cell);
+    for (; k < inner.last; ++k, x += sample_step, cursor->advance())
+      drawCell(data, cursor->index(), profile.sample(std::min(x, kLastSample)));
+  }
+  return static_cast<uint64_t>(inner.last - 1);
+}
+
+/// The same for a line that leaves the grid: cells outside are skipped.
+template <class Grid>
+STEREO_OCCUPANCY_INLINE uint64_t drawInnerCellsClipped(const Grid& g, const LineWalk& w, const InnerSlabs& inner,
+                                                       const RangeProfile& profile, LineCursor* cursor) {
+  const bool measures = profile.l_p_m < std::numeric_limits<float>::infinity();
+  const int k_free = measures ? inner.firstReaching(profile, profile.front_m) : inner.last;
+  uint64_t written = 0;
+  float t = inner.t1;
+  for (int k = 1; k < inner.last;
+       ++k, t += inner.dt, cursor->pos_a += cursor->step_a, cursor->pos_b += cursor->step_b) {
+    const int64_t cell_a = cursor->pos_a >> 32, cell_b = cursor->pos_b >> 32;
+    const int slab = w.first_slab + k * w.step;
+    if (slab < 0 || slab >= g.size[w.major] || cell_a < 0 || cell_a >= g.size[w.minor_a] || cell_b < 0 ||
+        cell_b >= g.size[w.minor_b])
+      continue;
+    drawCell(g.data, slab * g.stride[w.major] + cell_a * cursor->stride_a + cell_b * cursor->stride_b,
+             k < k_free ? profile.free_log_odds : profile.at(t * inner.c));
+    ++written;
+  }
+  return written;
+}
+
+}  // namespace
+
 uint64_t LineDrawer::drawRay(const RayGrid& g, const Eigen::Vector3d& W_dir, const RangeProfile& profile,
                              double l_begin, double l_stop) const {
-  const double c = g.c;
-  const double inv_c = g.inv_c;
   const double l_end = std::min({static_cast<double>(profile.endRange()), g.max_range_m, l_stop});
   if (!(l_end > l_begin)) return 0;
-
-  // Cell units relative to the grid's lower corner. One cell per slab of the
-  // major axis (a 3D Bresenham line); in each slab the cell is the one where
-  // the ray crosses the slab's centre plane, and l is the ray's range there.
-  const Eigen::Vector3d& g0 = g.g0;
-  const double t_begin = l_begin * inv_c;
-  const double t_end = l_end * inv_c;
-  const double abs_dir[3] = {std::abs(W_dir[0]), std::abs(W_dir[1]), std::abs(W_dir[2])};
-  int m = abs_dir[1] > abs_dir[0] ? 1 : 0;  // the first of the largest, as Eigen's maxCoeff
-  if (abs_dir[2] > abs_dir[m]) m = 2;
-  static constexpr int kNext[3] = {1, 2, 0};
-  const int a = kNext[m];
-  const int b = kNext[a];
-  const double g_begin[3] = {g0[0] + W_dir[0] * t_begin, g0[1] + W_dir[1] * t_begin, g0[2] + W_dir[2] * t_begin};
-  const double g_end[3] = {g0[0] + W_dir[0] * t_end, g0[1] + W_dir[1] * t_end, g0[2] + W_dir[2] * t_end};
-  const int k0 = floorToInt(g_begin[m]);
-  const int k1 = floorToInt(g_end[m]);
-  const int step = W_dir[m] > 0.0 ? 1 : -1;
-  const int n = std::abs(k1 - k0) + 1;
-  const double dt = 1.0 / abs_dir[m];
-  const double t0 = (k0 + 0.5 - g0[m]) / W_dir[m];  // |t0 - t_begin| <= dt / 2
-
-  const Eigen::Vector3i& size = g.size;
-  const int64_t* stride = g.stride;
-  float* data = g.data;
-  auto put = [&](int64_t idx, float value) {
-    float& cell = data[idx];
-    cell = std::max(cell, value);  // obstacle priority (section V-A, step 2b)
-  };
-  // When both ends lie inside the grid (the usual case: the grid covers the
-  // frustum), so does the segment and no index needs a check.
-  bool inside = true;
-  for (int i = 0; i < 3; ++i)
-    inside &= (std::min(g_begin[i], g_end[i]) >= RayGrid::kMargin) & (std::max(g_begin[i], g_end[i]) < g.upper[i]);
-  // The first and the last slab are only partly on the segment: sample the
-  // segment point nearest to the centre plane. Cells outside the grid are
-  // skipped (only possible when the grid does not cover the segment).
-  uint64_t written = 0;
-  auto endCell = [&](int km, double t) {
-    t = std::clamp(t, t_begin, t_end);
-    const int ka = floorToInt(g0[a] + W_dir[a] * t);
-    const int kb = floorToInt(g0[b] + W_dir[b] * t);
-    if (!inside && (km < 0 || km >= size[m] || ka < 0 || ka >= size[a] || kb < 0 || kb >= size[b])) return;
-    put(km * stride[m] + ka * stride[a] + kb * stride[b], profile.at(static_cast<float>(t * c)));
-    ++written;
-  };
-  endCell(k0, t0);
-  if (n == 1) return written;
-
-  // Inner slabs 1 .. n-2: t_begin < t < t_end, so their cells lie on the segment.
-  // The minor coordinates step in 32.32 fixed point: exact sums, floor by shift.
-  constexpr double kOne = 4294967296.0;  // 2^32
-  const float t1 = static_cast<float>(t0 + dt);
-  int64_t pa = roundToInt64((g0[a] + W_dir[a] * (t0 + dt)) * kOne);
-  int64_t pb = roundToInt64((g0[b] + W_dir[b] * (t0 + dt)) * kOne);
-  const int64_t dta = roundToInt64(W_dir[a] * dt * kOne), dtb = roundToInt64(W_dir[b] * dt * kOne);
-  const float dtf = static_cast<float>(dt), cf = static_cast<float>(c);
-  int64_t idx_m = static_cast<int64_t>(k0 + step) * stride[m];
-  const int64_t didx_m = step * stride[m];
-  const int64_t sa = stride[a], sb = stride[b];
-  const float inv_cf = static_cast<float>(inv_c);
-  auto firstWith = [&](float u) {  // first inner k whose t_k reaches (l_p + u) / c (n - 1 if none)
-    const float steps = ((profile.l_p_m + u) * inv_cf - t1) / dtf;  // +inf for free space
-    if (!(steps > 0.0f)) return 1;
-    if (steps > static_cast<float>(n - 1)) return n - 1;
-    return std::min(n - 1, 1 + ceilToInt(steps));
-  };
-  // Free space up to the measurement's front: one value for all those cells
-  // (all of them on a line of free space, l_p = inf).
-  const bool measures = profile.l_p_m < std::numeric_limits<float>::infinity();
-  const int k_free = measures ? firstWith(profile.front_m) : n - 1;
-  auto cellA = [&]() { return static_cast<int64_t>(pa >> 32); };
-  auto cellB = [&]() { return static_cast<int64_t>(pb >> 32); };
-  int k = 1;
-  if (inside) {
-    // The inner cells in four runs, by the offset u = l - l_p at their
-    // centre plane: free (u < front), rising (u < -c/2), peak (|u| <= c/2),
-    // falling (u > c/2). Free and peak cells share one value; in the rising
-    // and falling runs the table position moves by a constant step.
-    auto advance = [&]() {
-      pa += dta;
-      pb += dtb;
-      idx_m += didx_m;
-    };
-    const float free_value = profile.free_log_odds;  // a local: stores to the grid cannot change it
-    // The free run, most of the cells drawn, two cells at a time.
-#if STEREO_OCCUPANCY_X86_64_SIMD
-    if (simd_ == SimdLevel::kSse2 && sa <= 0xffffffffLL && sb <= 0xffffffffLL) {
-      FreeRun run{pa, pb, idx_m, dta, dtb, didx_m, sa, sb};
-      k = freeRunSse2(data, k, k_free, free_value, &run);
-      pa = run.pa;
-      pb = run.pb;
-      idx_m = run.idx_m;
-    }
-#endif
-    for (; k < k_free; ++k, advance()) put(idx_m + cellA() * sa + cellB() * sb, free_value);
-    if (k < n - 1) {  // the measurement's window reaches the inner slabs
-      const float hc = profile.half_cell_m;
-      const int k_peak = firstWith(-hc), k_fall = firstWith(hc);
-      const float dx = dtf * cf * profile.samples_per_m;
-      const float x_max = (LogOddsTable::kFrontSigmas + LogOddsTable::kTailSigmas) * LogOddsTable::kSamplesPerSigma;
-      auto sampleAt = [&](int kk, float e_shift) {  // table position of inner cell kk
-        return ((t1 + (kk - 1) * dtf) * cf - profile.l_p_m + e_shift - profile.row_origin_m) * profile.samples_per_m;
-      };
-      float x = sampleAt(k, hc);
-      for (; k < k_peak; ++k, x += dx, advance())
-        put(idx_m + cellA() * sa + cellB() * sb, profile.sample(std::max(x, 0.0f)));
-      const float peak = profile.sample((-profile.row_origin_m) * profile.samples_per_m);
-      for (; k < k_fall; ++k, advance()) put(idx_m + cellA() * sa + cellB() * sb, peak);
-      x = sampleAt(k, -hc);
-      for (; k < n - 1; ++k, x += dx, advance())
-        put(idx_m + cellA() * sa + cellB() * sb, profile.sample(std::min(x, x_max)));
-    }
-    written += static_cast<uint64_t>(n - 2);
-  } else {
-    float t = t1;
-    for (; k < n - 1; ++k, t += dtf, pa += dta, pb += dtb) {
-      const int64_t ka = cellA(), kb = cellB();
-      const int km = k0 + k * step;
-      if (km < 0 || km >= size[m] || ka < 0 || ka >= size[a] || kb < 0 || kb >= size[b]) continue;
-      put(km * stride[m] + ka * sa + kb * sb, k < k_free ? profile.free_log_odds : profile.at(t * cf));
-      ++written;
-    }
-  }
-  endCell(k0 + (n - 1) * step, t0 + (n - 1) * dt);
+  const LineWalk w = walkOf(g, W_dir, l_begin * g.inv_c, l_end * g.inv_c);
+  uint64_t written = drawEndCell(g, W_dir, w, profile, w.first_slab, w.t_first);
+  if (w.slabs == 1) return written;
+  // Inner slabs: t_begin < t < t_end, so their cells lie on the segment.
+  const InnerSlabs inner{static_cast<float>(w.t_first + w.dt), static_cast<float>(w.dt), static_cast<float>(g.c),
+                         static_cast<float>(g.inv_c), w.slabs - 1};
+  LineCursor cursor = innerCursor(g, W_dir, w);
+  written += w.inside ? drawInnerCells(g.data, inner, profile, simd_, &cursor)
+                      : drawInnerCellsClipped(g, w, inner, profile, &cursor);
+  written += drawEndCell(g, W_dir, w, profile, w.first_slab + (w.slabs - 1) * w.step,
+                         w.t_first + (w.slabs - 1) * w.dt);
   return written;
 }
 

@@ -115,7 +115,8 @@ std::map<std::string, std::pair<std::string, std::string>> yamlSection(const std
     if (!line.empty() && line[0] != ' ' && line[0] != '#') inside = line == section + ":";
     if (!inside || line.rfind("  ", 0) != 0 || trim(line).empty() || trim(line)[0] == '#') continue;
     const size_t colon = line.find(':'), hash = line.find('#');
-    const std::string value = trim(line.substr(colon + 1, hash == std::string::npos ? std::string::npos : hash - colon - 1));
+    const std::string value =
+        trim(line.substr(colon + 1, hash == std::string::npos ? std::string::npos : hash - colon - 1));
     entries[trim(line.substr(0, colon))] = {value, hash == std::string::npos ? "" : line.substr(hash + 1)};
   }
   return entries;
@@ -141,7 +142,8 @@ void expectYamlSaysTheTable(const std::string& section) {
       EXPECT_EQ(value == "\"\"" ? "" : value, row.text) << section << "." << name;
     }
   }
-  for (const auto& entry : yaml) EXPECT_TRUE(rows.count(entry.first)) << section << "." << entry.first << " is no parameter";
+  for (const auto& entry : yaml)
+    EXPECT_TRUE(rows.count(entry.first)) << section << "." << entry.first << " is no parameter";
 }
 
 /// The rows `| \`name\` | type | default | range | unit | meaning |` of the
@@ -190,7 +192,8 @@ void expectReadmeSaysTheTable(const std::string& nodelet) {
       EXPECT_EQ(shown == "\"\"" ? "" : shown, row.text) << nodelet << ": " << name;
     }
   }
-  for (const auto& entry : readme) EXPECT_TRUE(rows.count(entry.first)) << nodelet << ": " << entry.first << " is no parameter";
+  for (const auto& entry : readme)
+    EXPECT_TRUE(rows.count(entry.first)) << nodelet << ": " << entry.first << " is no parameter";
 }
 
 }  // namespace
