@@ -108,7 +108,7 @@ class DisparityDrawer {
 
   /// The pyramid built for the last pyramidal drawing (for inspection and
   /// tests): the min pyramid for line drawing, the max pyramid for ray tracing.
-  const DisparityPyramid& pyramid() const { return pyramid_; }
+  const DisparityPyramid& pyramid() const { return drawsLines() ? min_pyramid_ : max_pyramid_; }
 
  private:
   void checkInput(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C) const;
@@ -121,8 +121,13 @@ class DisparityDrawer {
   LineDrawer line_drawer_;
   RayTracer ray_tracer_;
   std::unique_ptr<DisparityBlockBound> bound_;  ///< only for the bounded variants
-  DisparityPyramid pyramid_;
-  DisparityPyramid second_pyramid_;  ///< the other pyramid of a bounded variant
+  bool drawsLines() const {
+    return config_.algorithm == DrawingAlgorithm::kLine || config_.algorithm == DrawingAlgorithm::kLinePyramid ||
+           config_.algorithm == DrawingAlgorithm::kLinePyramidBounded;
+  }
+
+  DisparityPyramid min_pyramid_;  ///< for line drawing (eq. 14) and both bounded variants
+  DisparityPyramid max_pyramid_;  ///< for ray tracing (section VI-C) and both bounded variants
   DistanceDependentBlur blur_;
 };
 

@@ -127,7 +127,8 @@ void DisparityDrawer::prepareGrid(const Eigen::Isometry3d& T_W_C, LocalGrid* gri
   const Eigen::AlignedBox3d box = frustumBoundingBox(camera_, T_W_C);
   // Global cell indices are ints (and OctoMap keys 16 bits): refuse poses
   // whose cells could not even be numbered.
-  if ((box.min().array().abs().max(box.max().array().abs()) / config_.resolution_m > 1e9).any())
+  constexpr double kMaxCellIndex = 1e9;  // below 2^31, with room for the box and its padding
+  if ((box.min().array().abs().max(box.max().array().abs()) / config_.resolution_m > kMaxCellIndex).any())
     throw std::invalid_argument("camera position too far from the world origin for this resolution");
   const Eigen::Array3d cells = (box.sizes() / config_.resolution_m).array() + 2.0 * padding + 2.0;
   if (!(cells.prod() <= static_cast<double>(config_.max_grid_cells)))
@@ -145,26 +146,25 @@ DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::
       line_drawer_.drawImage(disparity, T_W_C, grid, &stats);
       break;
     case DrawingAlgorithm::kLinePyramid:
-      pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel());
-      line_drawer_.drawPyramid(pyramid_, T_W_C, grid, &stats);
+      min_pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel());
+      line_drawer_.drawPyramid(min_pyramid_, T_W_C, grid, &stats);
       break;
     case DrawingAlgorithm::kRayTrace:
-      pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, 0);
-      ray_tracer_.drawImage(pyramid_, T_W_C, grid, &stats);
+      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, 0);  // level 0: the image as is
+      ray_tracer_.drawImage(max_pyramid_, T_W_C, grid, &stats);
       break;
     case DrawingAlgorithm::kRayTracePyramid:
-      pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel());
-      ray_tracer_.drawPyramid(pyramid_, T_W_C, grid, &stats);
+      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel());
+      ray_tracer_.drawPyramid(max_pyramid_, T_W_C, grid, &stats);
       break;
     case DrawingAlgorithm::kLinePyramidBounded:
-      pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel());
-      second_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel());
-      line_drawer_.drawPyramidBounded(pyramid_, second_pyramid_, *bound_, T_W_C, grid, &stats);
-      break;
     case DrawingAlgorithm::kRayTracePyramidBounded:
-      pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel());
-      second_pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel());
-      ray_tracer_.drawPyramidBounded(second_pyramid_, pyramid_, *bound_, T_W_C, grid, &stats);
+      min_pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel());
+      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel());
+      if (config_.algorithm == DrawingAlgorithm::kLinePyramidBounded)
+        line_drawer_.drawPyramidBounded(min_pyramid_, max_pyramid_, *bound_, T_W_C, grid, &stats);
+      else
+        ray_tracer_.drawPyramidBounded(min_pyramid_, max_pyramid_, *bound_, T_W_C, grid, &stats);
       break;
   }
   if (config_.count_different_cells) stats.different_grid_cells = grid->countKnown();

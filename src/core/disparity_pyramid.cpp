@@ -139,7 +139,8 @@ PyramidLevelTable::PyramidLevelTable(const StereoCameraModel& camera, double cel
   // At most 16 enlargement levels (2^-16 px, far below any use): eq. 15's
   // shifts and the level sizes stay within an int, also where c·d/b
   // underflows to 0 (ilogb(0) = INT_MIN).
-  min_level_ = std::clamp(std::ilogb(far_disparity_ * c_over_b_), -16, 0);
+  constexpr int kMostEnlargements = 16;
+  min_level_ = std::clamp(std::ilogb(far_disparity_ * c_over_b_), -kMostEnlargements, 0);
   const int size_limit =
       std::ilogb(static_cast<double>(std::max(camera.config().width_px, camera.config().height_px)));
   // The nearest range, not the message's search range: drawing the same scene

@@ -180,6 +180,132 @@ void RayTracer::drawPyramid(const DisparityPyramid& max_pyramid, const Eigen::Is
   });
 }
 
+namespace {
+
+/// The bounded pyramidal look-up of one cell (beyond the paper): the largest
+/// disparity d̂ over the cell's footprint in the image, from the
+/// max-disparity pyramid at the footprint's level (eq. 13), refined where a
+/// block mixes depths the bound cannot draw with one value.
+class FootprintSearch {
+ public:
+  /// A footprint of half width @p radius_px around the projection (u, v),
+  /// clipped to the image (so that a cell at the camera cannot overflow an
+  /// int), searched from level @p level.
+  FootprintSearch(const DisparityPyramid& min_pyramid, const DisparityPyramid& max_pyramid,
+                  const DisparityBlockBound& bound, int level, double u, double v, double radius_px,
+                  DrawStatistics* stats)
+      : min_pyramid_(min_pyramid),
+        max_pyramid_(max_pyramid),
+        bound_(bound),
+        level_(level),
+        // Refined at most two levels: a block of level i-2 reaches at most a
+        // quarter of the footprint's side (eq. 13) beyond it.
+        finest_level_(std::max(0, level - kRefinedLevels)),
+        // Pixel-edge coordinates: level-0 pixel k covers [k, k+1).
+        x_lo_(std::max(u + 0.5 - radius_px, 0.0)),
+        x_hi_(std::min(u + 0.5 + radius_px, static_cast<double>(max_pyramid.width(0)))),
+        y_lo_(std::max(v + 0.5 - radius_px, 0.0)),
+        y_hi_(std::min(v + 0.5 + radius_px, static_cast<double>(max_pyramid.height(0)))),
+        stats_(stats) {}
+
+  /// d̂ of the footprint; DisparityPyramid::kInvalidMax if it holds no valid pixel.
+  float maximum() {
+    const double scale = 1.0 / static_cast<double>(1 << level_);
+    const int bx0 = std::max(0, static_cast<int>(x_lo_ * scale));  // truncation: floor, or <= 0
+    const int by0 = std::max(0, static_cast<int>(y_lo_ * scale));
+    const int bx1 = std::min(max_pyramid_.width(level_) - 1, ceilToInt(x_hi_ * scale) - 1);
+    const int by1 = std::min(max_pyramid_.height(level_) - 1, ceilToInt(y_hi_ * scale) - 1);
+    if ((bx1 - bx0 + 1) * (by1 - by0 + 1) > static_cast<int>(blocks_.size())) {
+      // Only near cells whose level was clamped to the top: every block, in order.
+      for (int by = by0; by <= by1; ++by)
+        for (int bx = bx0; bx <= bx1; ++bx) refine(level_, bx, by);
+      return found_;
+    }
+    // Nearest blocks first: once one is resolved, farther ones are skipped.
+    int n = 0;
+    const cv::Mat& blocks_of_level = max_pyramid_.level(level_);
+    for (int by = by0; by <= by1; ++by) {
+      const float* row = blocks_of_level.ptr<float>(by);
+      for (int bx = bx0; bx <= bx1; ++bx) blocks_[n++] = {row[bx], bx, by};
+    }
+    stats_->used_image_pixels += static_cast<uint64_t>(n);
+    if (n == 0) return found_;
+    int best = 0;
+    for (int k = 1; k < n; ++k) best = blocks_[k].max > blocks_[best].max ? k : best;
+    const Block& nearest = blocks_[best];
+    if (nearest.max < 0.0f) return found_;  // no valid pixel
+    // The usual case: the nearest block is uniform enough or wholly inside.
+    if (level_ == finest_level_ || inside(nearest.bx, nearest.by, level_) ||
+        bound_.isFaithful(min_pyramid_.level(level_).ptr<float>(nearest.by)[nearest.bx], nearest.max)) {
+      ++stats_->used_image_pixels;
+      return nearest.max;
+    }
+    sortByDescendingMaximum(n);
+    for (int k = 0; k < n && blocks_[k].max > found_; ++k) refine(level_, blocks_[k].bx, blocks_[k].by);
+    return found_;
+  }
+
+ private:
+  static constexpr int kRefinedLevels = 2;
+  /// Blocks of the footprint's level that the search orders (3 x 3 at most
+  /// where eq. 13's level is not clamped).
+  static constexpr size_t kMaxBlocks = 16;
+  struct Block {
+    float max;
+    int bx, by;
+  };
+
+  /// Does block b of level j, [b·2^j, (b+1)·2^j), overlap [lo, hi)?
+  static bool overlaps(int b, int j, double lo, double hi) {
+    return static_cast<double>(b << j) < hi && static_cast<double>((b + 1) << j) > lo;
+  }
+  /// Does block (bx, by) of level j lie wholly inside the footprint?
+  bool inside(int bx, int by, int j) const {
+    return static_cast<double>(bx << j) >= x_lo_ && static_cast<double>((bx + 1) << j) <= x_hi_ &&
+           static_cast<double>(by << j) >= y_lo_ && static_cast<double>((by + 1) << j) <= y_hi_;
+  }
+  /// Depth-first. A block whose maximum cannot raise found_, or that lies
+  /// wholly inside the footprint, is not refined; nor is one of the finest level.
+  void refine(int j, int bx, int by) {
+    const float max = max_pyramid_.level(j).ptr<float>(by)[bx];
+    ++stats_->used_image_pixels;
+    if (max <= found_) return;  // also an all-invalid block (-1)
+    if (j > finest_level_ && !inside(bx, by, j)) {
+      ++stats_->used_image_pixels;
+      if (!bound_.isFaithful(min_pyramid_.level(j).ptr<float>(by)[bx], max)) {
+        const int w = max_pyramid_.width(j - 1), h = max_pyramid_.height(j - 1);
+        for (int cy = 2 * by; cy <= 2 * by + 1 && cy < h; ++cy) {
+          if (!overlaps(cy, j - 1, y_lo_, y_hi_)) continue;
+          for (int cx = 2 * bx; cx <= 2 * bx + 1 && cx < w; ++cx)
+            if (overlaps(cx, j - 1, x_lo_, x_hi_)) refine(j - 1, cx, cy);
+        }
+        return;
+      }
+    }
+    found_ = max;
+  }
+  /// Insertion sort of the first @p n blocks.
+  void sortByDescendingMaximum(int n) {
+    for (int k = 1; k < n; ++k) {
+      const Block block = blocks_[k];
+      int q = k;
+      for (; q > 0 && blocks_[q - 1].max < block.max; --q) blocks_[q] = blocks_[q - 1];
+      blocks_[q] = block;
+    }
+  }
+
+  const DisparityPyramid& min_pyramid_;
+  const DisparityPyramid& max_pyramid_;
+  const DisparityBlockBound& bound_;
+  const int level_, finest_level_;
+  const double x_lo_, x_hi_, y_lo_, y_hi_;  ///< the footprint [px edges]
+  DrawStatistics* stats_;
+  float found_ = DisparityPyramid::kInvalidMax;  ///< d̂ so far
+  std::array<Block, kMaxBlocks> blocks_;
+};
+
+}  // namespace
+
 void RayTracer::drawPyramidBounded(const DisparityPyramid& min_pyramid, const DisparityPyramid& max_pyramid,
                                    const DisparityBlockBound& bound, const Eigen::Isometry3d& T_W_C,
                                    LocalGrid* grid, DrawStatistics* stats) const {
@@ -187,91 +313,10 @@ void RayTracer::drawPyramidBounded(const DisparityPyramid& min_pyramid, const Di
             min_pyramid.topLevel() == max_pyramid.topLevel());
   const int top = max_pyramid.topLevel();
   const double half_cell_f = 0.5 * grid->resolution() * camera_.config().focal_length_px;
-  const int width0 = max_pyramid.width(0), height0 = max_pyramid.height(0);
   traverse(T_W_C, grid, stats, [&](const Eigen::Vector3d& C_p, double u, double v, DrawStatistics* st) {
     // Eq. 13's level: 2^i <= c·f/z, the footprint spans 2-3 blocks per axis.
-    const int i = std::clamp(levels_.levelForDepth(C_p.z()), 0, top);
-    // The footprint in pixel-edge coordinates: level-0 pixel k covers [k, k+1),
-    // a level-j block b covers [b·2^j, (b+1)·2^j).
-    // Clipped to the image, so that a cell at the camera cannot overflow an int.
-    const double r = half_cell_f / C_p.z();
-    const double x_lo = std::max(u + 0.5 - r, 0.0), x_hi = std::min(u + 0.5 + r, static_cast<double>(width0));
-    const double y_lo = std::max(v + 0.5 - r, 0.0), y_hi = std::min(v + 0.5 + r, static_cast<double>(height0));
-    // Block b of level j spans [b·2^j, (b+1)·2^j); does it overlap [lo, hi)?
-    auto overlaps = [](int b, int j, double lo, double hi) {
-      return static_cast<double>(b << j) < hi && static_cast<double>((b + 1) << j) > lo;
-    };
-    auto inside = [&](int bx, int by, int j) {
-      return static_cast<double>(bx << j) >= x_lo && static_cast<double>((bx + 1) << j) <= x_hi &&
-             static_cast<double>(by << j) >= y_lo && static_cast<double>((by + 1) << j) <= y_hi;
-    };
-    // Refined at most two levels: a block of level i-2 reaches at most a
-    // quarter of the footprint's side (eq. 13) beyond it.
-    const int j_min = std::max(0, i - 2);
-    float m = DisparityPyramid::kInvalidMax;
-    // Depth-first. A block whose maximum cannot raise d̂, or that lies
-    // wholly inside the footprint, is not refined; nor is one of level j_min.
-    auto visit = [&](auto&& self, int j, int bx, int by) -> void {
-      const float hi = max_pyramid.level(j).ptr<float>(by)[bx];
-      ++st->used_image_pixels;
-      if (hi <= m) return;  // also an all-invalid block (-1)
-      if (j > j_min && !inside(bx, by, j)) {
-        ++st->used_image_pixels;
-        if (!bound.isFaithful(min_pyramid.level(j).ptr<float>(by)[bx], hi)) {
-          const int w = max_pyramid.width(j - 1), h = max_pyramid.height(j - 1);
-          for (int cy = 2 * by; cy <= 2 * by + 1 && cy < h; ++cy) {
-            if (!overlaps(cy, j - 1, y_lo, y_hi)) continue;
-            for (int cx = 2 * bx; cx <= 2 * bx + 1 && cx < w; ++cx)
-              if (overlaps(cx, j - 1, x_lo, x_hi)) self(self, j - 1, cx, cy);
-          }
-          return;
-        }
-      }
-      m = hi;
-    };
-    const double s = 1.0 / static_cast<double>(1 << i);
-    const int bx0 = std::max(0, static_cast<int>(x_lo * s));  // truncation: floor, or <= 0
-    const int by0 = std::max(0, static_cast<int>(y_lo * s));
-    const int bx1 = std::min(max_pyramid.width(i) - 1, ceilToInt(x_hi * s) - 1);
-    const int by1 = std::min(max_pyramid.height(i) - 1, ceilToInt(y_hi * s) - 1);
-    // Nearest blocks first: once one is resolved, farther ones are skipped.
-    struct Block {
-      float hi;
-      int bx, by;
-    };
-    std::array<Block, 16> blocks;
-    if ((bx1 - bx0 + 1) * (by1 - by0 + 1) > static_cast<int>(blocks.size())) {
-      // Only near cells whose level was clamped to the top: every block, in order.
-      for (int by = by0; by <= by1; ++by)
-        for (int bx = bx0; bx <= bx1; ++bx) visit(visit, i, bx, by);
-      return m;
-    }
-    int n = 0;
-    const cv::Mat& level_i = max_pyramid.level(i);
-    for (int by = by0; by <= by1; ++by) {
-      const float* row = level_i.ptr<float>(by);
-      for (int bx = bx0; bx <= bx1; ++bx) blocks[n++] = {row[bx], bx, by};
-    }
-    st->used_image_pixels += static_cast<uint64_t>(n);
-    if (n == 0) return m;
-    int best = 0;
-    for (int k = 1; k < n; ++k) best = blocks[k].hi > blocks[best].hi ? k : best;
-    const Block& nearest = blocks[best];
-    if (nearest.hi < 0.0f) return m;  // no valid pixel
-    // The usual case: the nearest block is uniform enough or wholly inside.
-    if (i == j_min || inside(nearest.bx, nearest.by, i) ||
-        bound.isFaithful(min_pyramid.level(i).ptr<float>(nearest.by)[nearest.bx], nearest.hi)) {
-      ++st->used_image_pixels;
-      return nearest.hi;
-    }
-    for (int k = 1; k < n; ++k) {  // insertion sort, by descending maximum
-      const Block block = blocks[k];
-      int q = k;
-      for (; q > 0 && blocks[q - 1].hi < block.hi; --q) blocks[q] = blocks[q - 1];
-      blocks[q] = block;
-    }
-    for (int k = 0; k < n && blocks[k].hi > m; ++k) visit(visit, i, blocks[k].bx, blocks[k].by);
-    return m;
+    const int level = std::clamp(levels_.levelForDepth(C_p.z()), 0, top);
+    return FootprintSearch(min_pyramid, max_pyramid, bound, level, u, v, half_cell_f / C_p.z(), st).maximum();
   });
 }
 

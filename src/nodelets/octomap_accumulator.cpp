@@ -27,6 +27,8 @@ namespace stereo_occupancy {
 namespace {
 /// At most one warning of a kind in this time [s].
 constexpr double kWarnThrottleS = 5.0;
+/// A failing periodic save repeats its error at most this often [s].
+constexpr double kSaveErrorThrottleS = 60.0;
 /// Per-update timings kept for the summary at shutdown.
 constexpr size_t kMaxTimings = 1000000;
 }  // namespace
@@ -93,7 +95,7 @@ void OctomapAccumulator::onInit() {
         ++saves_failed_;
         last_save_failed_ = true;
         last_problem_ = std::string("periodic save failed: ") + e.what();
-        NODELET_ERROR_THROTTLE(60.0, "periodic save failed (the previous map file stays): %s", e.what());
+        NODELET_ERROR_THROTTLE(kSaveErrorThrottleS, "periodic save failed (the previous map file stays): %s", e.what());
       }
     });
   }
