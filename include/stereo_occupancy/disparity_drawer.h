@@ -53,7 +53,7 @@ struct DrawingConfig {
   /// so that a fine resolution with a long range cannot exhaust memory).
   size_t max_grid_cells = 64u << 20;  // 256 MiB of log-odds
   /// Fill DrawStatistics::different_grid_cells (Table I's "different grid
-  /// cells"): one more pass over the grid per image, about 0.1 ms for the
+  /// cells"): one more pass over the grid per image (docs/performance.md) for the
   /// default frustum. For the benchmarks; the mapper does not read it.
   bool count_different_cells = false;
   /// The line drawing's free-run instruction set: every level draws the same

@@ -11,7 +11,7 @@
 #include "stereo_occupancy/integer_math.h"
 
 // drawRay()'s steps run once per line, 10^5 lines an image: inlined into it,
-// as one function they were (a call each costs about 4 % of line drawing).
+// as one function they were (out of line they cost time: docs/performance.md).
 #if defined(__GNUC__)
 #define STEREO_OCCUPANCY_INLINE inline __attribute__((always_inline))
 #else

@@ -7,8 +7,14 @@
 #include <octomap/OcTree.h>
 
 #include <array>
+#include <map>
 #include <cstdio>
+#include <cstdlib>
+#include <sstream>
 #include <string>
+#include <vector>
+
+#include <opencv2/imgcodecs.hpp>
 
 namespace {
 
@@ -33,30 +39,61 @@ double jsonNumber(const std::string& json, const std::string& key) {
   return std::stod(json.substr(pos + key.size() + 4));
 }
 
-size_t fileSize(const std::string& path) {
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return 0;
-  std::fseek(f, 0, SEEK_END);
-  const long n = std::ftell(f);
-  std::fclose(f);
-  return n > 0 ? static_cast<size_t>(n) : 0;
+/// The cells of the whole-map table's row "| <cell> | <method> |" (empty if none).
+std::vector<std::string> tableRow(const std::string& text, const std::string& cell, const std::string& method) {
+  const std::string start = "| " + cell + " | " + method + " |";
+  const auto pos = text.find(start);
+  if (pos == std::string::npos) return {};
+  std::vector<std::string> cells;
+  std::stringstream line(text.substr(pos + 1, text.find('\n', pos) - pos - 1));
+  for (std::string c; std::getline(line, c, '|');) cells.push_back(c.substr(1, c.size() - 2));
+  return cells;
 }
 
 }  // namespace
 
-TEST(OfflineTools, CompareWithOctomapPrintsEveryMethod) {
+// Every method's whole-map row holds times and scores that fit the method:
+// the plain drawings find the posts, line_pyramid calls surfaces free (the
+// paper's "risk of remaining holes"), the surface profile leaves fewer
+// phantoms than the Gaussian.
+TEST(OfflineTools, CompareWithOctomapScoresEveryMethod) {
   const Result r = run(std::string(COMPARE_OCTOMAP_EXE) + " --scenario posts --frame-step 50 --resolution 1.0");
   ASSERT_EQ(r.status, 0);
-  for (const char* method : {"| line |", "| line_pyramid |", "| raytrace |", "| raytrace_pyramid |",
-                             "| OctoMap insertPointCloud |", "| OctoMap insertPointCloud, discretize |"})
-    EXPECT_NE(r.out.find(method), std::string::npos) << method << "\n" << r.out;
+  // cell, method, draw ms, fusion ms, total ms, precision %, recall %, F1, phantom %, called free %, coverage %, ...
+  enum { kDrawMs = 2, kTotalMs = 4, kPrecision = 5, kRecall = 6, kF1 = 7, kPhantom = 8, kCalledFree = 9 };
+  std::map<std::string, std::vector<double>> rows;
+  for (const char* method : {"line", "line_pyramid", "raytrace", "raytrace_pyramid", "line_pyramid_bounded",
+                             "line_pyramid_bounded, surface", "OctoMap insertPointCloud",
+                             "OctoMap insertPointCloud, discretize"}) {
+    const std::vector<std::string> cells = tableRow(r.out, "1 m", method);
+    ASSERT_GE(cells.size(), 11u) << method << "\n" << r.out;
+    std::vector<double>& values = rows[method];
+    values.assign(cells.size(), 0.0);  // indices as in the row; "-" (not measured) stays 0
+    for (size_t i = kDrawMs; i < cells.size(); ++i) values[i] = std::strtod(cells[i].c_str(), nullptr);
+    EXPECT_GT(values[kDrawMs], 0.0) << method;
+    EXPECT_GE(values[kTotalMs], values[kDrawMs]) << method;
+    EXPECT_GT(values[kRecall], 95.0) << method;
+    EXPECT_GT(values[kPrecision], 90.0) << method;
+    EXPECT_NEAR(values[kF1], 2.0 / (100.0 / values[kPrecision] + 100.0 / values[kRecall]), 0.002) << method;
+  }
+  EXPECT_GT(rows["line_pyramid"][kCalledFree], 1.0);
+  EXPECT_LT(rows["line_pyramid_bounded"][kCalledFree], 0.5);
+  EXPECT_LT(rows["line_pyramid_bounded, surface"][kPhantom], rows["line_pyramid_bounded"][kPhantom]);
 }
 
+// The figures are pictures of something: the paper's sizes, and drawn in
+// more than one colour over much of the canvas.
 TEST(OfflineTools, FiguresAreWritten) {
   const std::string dir = ::testing::TempDir();
   ASSERT_EQ(run(std::string(MAKE_FIGURES_EXE) + " " + dir).status, 0);
   for (const char* f : {"fig1_inverse_sensor_model.png", "fig3_pyramid_levels.png", "fig5_blur.png"}) {
-    EXPECT_GT(fileSize(dir + f), 10000u) << f;
+    const cv::Mat image = cv::imread(dir + f, cv::IMREAD_GRAYSCALE);
+    ASSERT_FALSE(image.empty()) << f;
+    EXPECT_GE(image.cols, 300) << f;
+    EXPECT_GE(image.rows, 200) << f;
+    const double drawn = static_cast<double>(cv::countNonZero(image < 250)) / static_cast<double>(image.total());
+    EXPECT_GT(drawn, 0.02) << f << ": nearly blank";
+    EXPECT_LT(drawn, 0.98) << f << ": nearly filled";
     std::remove((dir + f).c_str());
   }
 }
@@ -108,7 +145,11 @@ TEST(OfflineTools, SimulateMapAndScoreAFlight) {
                               "offline_rt --param algorithm=raytrace_pyramid --param resolution_m=0.5");
   ASSERT_EQ(raytrace.status, 0);
   EXPECT_NE(raytrace.out.find("\"algorithm\": \"raytrace_pyramid\""), std::string::npos);
-  EXPECT_DOUBLE_EQ(octomap::OcTree(dir + "offline_rt.bt").getResolution(), 0.5);
+  octomap::OcTree raytraced(dir + "offline_rt.bt");
+  EXPECT_DOUBLE_EQ(raytraced.getResolution(), 0.5);
+  const octomap::OcTreeNode* raytraced_post = raytraced.search(14.9, 3.4, 4.1);
+  ASSERT_NE(raytraced_post, nullptr);
+  EXPECT_TRUE(raytraced.isNodeOccupied(raytraced_post));
   const Result bad = run(std::string(BAG_TO_MAP_EXE) + " --bag " + bag + " --output " + dir + "x --param nonsense=1");
   ASSERT_TRUE(WIFEXITED(bad.status));
   EXPECT_EQ(WEXITSTATUS(bad.status), 2);

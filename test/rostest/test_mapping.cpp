@@ -8,6 +8,7 @@
 #include <dynamic_reconfigure/Reconfigure.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <std_srvs/Empty.h>
 #include <std_srvs/Trigger.h>
 #include <stereo_msgs/DisparityImage.h>
 #include <tf2_ros/transform_broadcaster.h>
@@ -56,6 +57,29 @@ class MappingTest : public ::testing::Test {
            ros::WallTime::now() < until)
       ros::WallDuration(0.05).sleep();
     ASSERT_GT(disparity_pub_.getNumSubscribers(), 0u) << "DisparityMapper did not subscribe";
+    // Each case starts from an empty map, so that it passes or fails on its own.
+    ASSERT_TRUE(ros::service::waitForService("/octomap_accumulator/reset", ros::Duration(10.0)));
+    std_srvs::Empty reset;
+    ASSERT_TRUE(ros::service::call("/octomap_accumulator/reset", reset));
+  }
+
+  /// The mapper's diagnostic values, from the next /diagnostics message that has them.
+  std::map<std::string, std::string> mapperDiagnostics() {
+    std::map<std::string, std::string> values;
+    bool got = false;
+    ros::Subscriber sub = nh_.subscribe<diagnostic_msgs::DiagnosticArray>(
+        "/diagnostics", 10, [&](const diagnostic_msgs::DiagnosticArrayConstPtr& msg) {
+          std::lock_guard<std::mutex> lock(mutex_);
+          for (const auto& status : msg->status)
+            if (status.name == "disparity_mapper: mapper") {
+              for (const auto& kv : status.values) values[kv.key] = kv.value;
+              got = true;
+            }
+        });
+    EXPECT_TRUE(waitFor([&] { return got; }, 10.0)) << "no diagnostics from the mapper";
+    sub.shutdown();
+    std::lock_guard<std::mutex> lock(mutex_);
+    return values;
   }
 
   void onUpdate(const OccupancyUpdateConstPtr& msg) {
@@ -366,6 +390,11 @@ TEST_F(MappingTest, DepthInputReconfigureAndInvalidParameters) {
 // Hostile input: each bad message is refused without an update, the next
 // good image is mapped, and nothing non-finite reaches an update or the map.
 TEST_F(MappingTest, BadInputIsRefusedAndTheNextImageWorks) {
+  // The mapper's counters before this case: it counts what this case adds.
+  const std::map<std::string, std::string> before = mapperDiagnostics();
+  auto added = [&](const std::map<std::string, std::string>& now, const std::string& key) {
+    return std::stol(now.at(key)) - std::stol(before.at(key));
+  };
   ros::Publisher update_pub = nh_.advertise<OccupancyUpdate>("/occupancy_update", 5);
   // Stamped a little ahead, so that a later jump back lands at "now" (with
   // wall time an image far in the past is rightly too old for tf_timeout_s).
@@ -467,18 +496,12 @@ TEST_F(MappingTest, BadInputIsRefusedAndTheNextImageWorks) {
   sendFrame(after);
   ASSERT_TRUE(waitFor([&] { return updates_.back()->header.stamp == after; }, 20.0));
   // The mapper's diagnostics count what it refused and the jump back.
-  std::map<std::string, std::string> diag;
-  ros::Subscriber diag_sub = nh_.subscribe<diagnostic_msgs::DiagnosticArray>(
-      "/diagnostics", 10, [&](const diagnostic_msgs::DiagnosticArrayConstPtr& msg) {
-        std::lock_guard<std::mutex> lock(mutex_);
-        for (const auto& status : msg->status)
-          if (status.name == "disparity_mapper: mapper")
-            for (const auto& kv : status.values) diag[kv.key] = kv.value;
-      });
-  ASSERT_TRUE(waitFor([&] { return diag.count("time jumps back") && diag["time jumps back"] == "1"; }, 10.0));
+  ros::WallDuration(1.5).sleep();  // the diagnostics (1 Hz) published after the last image
+  const std::map<std::string, std::string> diag = mapperDiagnostics();
+  EXPECT_EQ(added(diag, "time jumps back"), 1);
+  EXPECT_EQ(added(diag, "dropped: invalid input"), 15);  // the 13 malformed messages and the 2 too-fine cameras
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    EXPECT_EQ(diag["dropped: invalid input"], "15");  // the 13 malformed messages and the 2 too-fine cameras
     EXPECT_EQ(too_fine_errors, 1);
     // tf2 itself refuses a NaN pose and a non-unit quaternion, so those two
     // images wait for a pose that never comes (dropped when the queue pushes

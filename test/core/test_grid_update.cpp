@@ -1,0 +1,131 @@
+// The run-length encoded update of a local grid (grid_update.h): encoding,
+// consistency checks and the sibling-block walk the fusion uses.
+
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <random>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "stereo_occupancy/grid_update.h"
+
+using namespace stereo_occupancy;
+
+TEST(GridUpdate, EncodesKnownCellsAsRuns) {
+  LocalGrid grid;
+  grid.reset(Eigen::Vector3i(10, 20, 30), Eigen::Vector3i(4, 3, 2), 0.5);
+  for (int x = 1; x < 4; ++x) grid.at(x, 1, 0) = 0.5f;  // one run of 3
+  grid.at(0, 0, 1) = -0.2f;                              // a run of 1
+  GridUpdate u;
+  encodeGridUpdate(grid, Eigen::Vector3d(1, 2, 3), &u);
+  EXPECT_EQ(u.run_start, (std::vector<uint32_t>{5, 12}));
+  EXPECT_EQ(u.run_length, (std::vector<uint32_t>{3, 1}));
+  EXPECT_EQ(u.numCells(), 4u);
+  std::string why;
+  EXPECT_TRUE(u.isConsistent(&why)) << why;
+  int seen = 0;
+  u.forEachCell([&](const Eigen::Vector3i& g, float v) {
+    if (seen < 3) {
+      EXPECT_EQ(g, Eigen::Vector3i(11 + seen, 21, 30));
+      EXPECT_FLOAT_EQ(v, 0.5f);
+    } else {
+      EXPECT_EQ(g, Eigen::Vector3i(10, 20, 31));
+    }
+    ++seen;
+  });
+  EXPECT_EQ(seen, 4);
+  GridUpdate bad = u;
+  bad.run_start = {5, 6};  // overlapping runs
+  EXPECT_FALSE(bad.isConsistent(&why));
+  bad = u;
+  bad.size = Eigen::Vector3i(2, 2, 2);  // runs past the grid's end
+  EXPECT_FALSE(bad.isConsistent(&why));
+}
+
+// Every value is checked, wherever it stands; finite extremes pass.
+TEST(GridUpdate, RefusesNonFiniteValues) {
+  LocalGrid grid;
+  grid.reset(Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(37, 1, 1), 0.25);
+  for (int x = 0; x < 37; ++x) grid.at(x, 0, 0) = 0.1f * (x + 1);
+  GridUpdate u;
+  encodeGridUpdate(grid, Eigen::Vector3d::Zero(), &u);
+  ASSERT_EQ(u.numCells(), 37u);
+  std::string why;
+  const float finite[] = {std::numeric_limits<float>::max(), -std::numeric_limits<float>::max(),
+                          std::numeric_limits<float>::denorm_min(), -0.0f};
+  for (float v : finite) {
+    GridUpdate ok = u;
+    ok.log_odds[36] = v;
+    EXPECT_TRUE(ok.isConsistent(&why)) << v << ": " << why;
+  }
+  const float not_finite[] = {std::numeric_limits<float>::quiet_NaN(), -std::numeric_limits<float>::quiet_NaN(),
+                              std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity()};
+  for (float v : not_finite)
+    for (size_t at : {size_t{0}, size_t{17}, size_t{36}}) {
+      GridUpdate bad = u;
+      bad.log_odds[at] = v;
+      why.clear();
+      EXPECT_FALSE(bad.isConsistent(&why)) << v << " at " << at;
+      EXPECT_NE(why.find("not finite"), std::string::npos) << why;
+    }
+}
+
+// The order the accumulator walks an update in: every cell once, with its
+// value, and the eight cells of each even-aligned 2x2x2 block one after
+// another, whatever the parity of the grid's origin and sizes, also for
+// runs that go on into the next row.
+TEST(GridUpdate, SiblingOrderVisitsEveryCellOnceBlockByBlock) {
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 40; ++trial) {
+    LocalGrid grid;
+    const Eigen::Vector3i origin(static_cast<int>(rng() % 21) - 10, static_cast<int>(rng() % 21) - 10,
+                                 static_cast<int>(rng() % 21) - 10);
+    const Eigen::Vector3i size(1 + rng() % 9, 1 + rng() % 7, 1 + rng() % 6);
+    grid.reset(origin, size, 0.25);
+    const double density = (rng() % 100) / 100.0;
+    for (int z = 0; z < size.z(); ++z)
+      for (int y = 0; y < size.y(); ++y)
+        for (int x = 0; x < size.x(); ++x)
+          if ((rng() % 1000) / 1000.0 < density) grid.at(x, y, z) = 0.01f * static_cast<float>(1 + rng() % 300);
+    GridUpdate u;
+    encodeGridUpdate(grid, Eigen::Vector3d::Zero(), &u);
+    std::map<std::array<int, 3>, float> expected, seen;
+    u.forEachCell([&](const Eigen::Vector3i& g, float v) { expected[{g.x(), g.y(), g.z()}] = v; });
+    std::set<std::array<int, 3>> finished_blocks;
+    std::array<int, 3> block{};
+    bool first = true;
+    u.forEachCellBySiblings([&](const Eigen::Vector3i& g, float v) {
+      const std::array<int, 3> cell{g.x(), g.y(), g.z()};
+      EXPECT_EQ(seen.count(cell), 0u) << "a cell twice";
+      seen[cell] = v;
+      const std::array<int, 3> b{g.x() >> 1, g.y() >> 1, g.z() >> 1};  // floor(g / 2): even-aligned blocks
+      if (!first && b != block) {
+        EXPECT_EQ(finished_blocks.count(b), 0u) << "a block visited again, trial " << trial;
+        finished_blocks.insert(block);
+      }
+      block = b;
+      first = false;
+    });
+    ASSERT_EQ(seen, expected) << "trial " << trial;
+    // The same cells a block at a time: blocks at even global indices, each once and holding a cell.
+    std::map<std::array<int, 3>, float> from_blocks;
+    std::set<std::array<int, 3>> blocks;
+    u.forEachSiblingBlock([&](const Eigen::Vector3i& g, const float(&values)[8]) {
+      EXPECT_TRUE(((g.x() | g.y() | g.z()) & 1) == 0) << g.transpose();
+      EXPECT_TRUE(blocks.insert({g.x(), g.y(), g.z()}).second) << "a block twice";
+      int held = 0;
+      for (int i = 0; i < 8; ++i)
+        if (values[i] == values[i]) {
+          ++held;
+          from_blocks[{g.x() + (i & 1), g.y() + ((i >> 1) & 1), g.z() + (i >> 2)}] = values[i];
+        }
+      EXPECT_GT(held, 0);
+    });
+    ASSERT_EQ(from_blocks, expected) << "trial " << trial;
+  }
+}
