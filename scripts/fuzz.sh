@@ -29,6 +29,7 @@ cp -n "$repo"/test/fuzz/corpus/* "$out/$corpus/" 2>/dev/null || true
 flags=(-std=c++17 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined
        -I"$repo/include" -isystem /usr/include/eigen3 -isystem /usr/include/opencv4)
 targets=(fuzz_disparity_drawer fuzz_occupancy_update)
+rm -rf "$out/obj" "$out/core"  # objects of renamed sources must not link in
 mkdir -p "$out/obj" "$out/core"
 # One object per source, compiled in parallel; the core's objects are shared.
 printf '%s\n' "$repo"/src/core/*.cpp |

@@ -32,6 +32,9 @@ echo "$summary"
 # One plain closing line, counted from the JUnit files: "N passed, N failed".
 cases=$(cat build/test_results/*/*.xml | grep -o '<testcase ' | wc -l || true)
 failed=$(cat build/test_results/*/*.xml | grep -oE '<(failure|error)[ >]' | wc -l || true)
-[ $sanitize_status = 0 ] || failed=$((failed + 1))  # an abort may leave no JUnit file
+# A script that stopped early may leave no JUnit file: count it as a failure.
+[ $sanitize_status = 0 ] || failed=$((failed + 1))
+[ $fuzz_status = 0 ] || [ -f "$results/fuzz.xml" ] || failed=$((failed + 1))
+[ $online_offline_status = 0 ] || [ -f "$results/online_offline.xml" ] || failed=$((failed + 1))
 echo "tests: $((cases - failed)) passed, $failed failed"
 [ $status = 0 ] && [ $sanitize_status = 0 ] && [ $fuzz_status = 0 ] && [ $online_offline_status = 0 ]

@@ -1,5 +1,7 @@
 #include "stereo_occupancy/sim/local_grid_octree.h"
 
+#include <limits>
+
 namespace stereo_occupancy {
 
 std::unique_ptr<octomap::OcTree> localGridToOcTree(const LocalGrid& grid) {
@@ -14,7 +16,8 @@ std::unique_ptr<octomap::OcTree> localGridToOcTree(const LocalGrid& grid) {
         if (value == LocalGrid::kUnknown || value == 0.0f) continue;
         const Eigen::Vector3i g = origin + Eigen::Vector3i(x, y, z);
         const Eigen::Vector3i k = g.array() + offset;
-        if ((k.array() < 0).any() || (k.array() > 65535).any()) continue;  // outside OcTree's extent
+        constexpr int kMaxKey = std::numeric_limits<octomap::key_type>::max();  // OcTree's extent
+        if ((k.array() < 0).any() || (k.array() > kMaxKey).any()) continue;
         tree->setNodeValue(octomap::OcTreeKey(k.x(), k.y(), k.z()), value, /*lazy_eval=*/true);
       }
     }
