@@ -185,6 +185,10 @@ class LogOddsTable {
   static constexpr int kPeakRows = 41;
   /// Δl below this is taken as this [m] (eq. 7 gives 6e-4 m at 0.5 m range).
   static constexpr float kMinDeltaL = 1e-6f;
+  /// Largest Δl a profile is built with [m]: far beyond any grid, and small
+  /// enough that its samples per metre and its window's ends stay finite
+  /// (a camera of tiny f gives rays of huge range and Δl = inf).
+  static constexpr float kMaxDeltaL = 1e9f;
 
   LogOddsTable(const InverseSensorModel& model, double cell_size_m);
 

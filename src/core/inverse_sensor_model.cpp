@@ -106,8 +106,10 @@ LogOddsTable::LogOddsTable(const InverseSensorModel& model, double cell_size_m)
 
 RangeProfile LogOddsTable::profile(float l_p_m, float delta_l_m) const {
   // A disparity near the matcher's largest at a very short range gives a Δl
-  // that float rounds to 0; the table's samples per metre must stay finite.
-  delta_l_m = std::max(delta_l_m, kMinDeltaL);
+  // that float rounds to 0, a hostile camera one of inf: the table's samples
+  // per metre and the window's ends must stay finite (NaN fails both tests).
+  delta_l_m = std::clamp(delta_l_m, kMinDeltaL, kMaxDeltaL);
+  if (!(delta_l_m >= kMinDeltaL)) delta_l_m = kMaxDeltaL;
   RangeProfile p;
   // Height of the peak above 0.5 (eq. 9), capped at p_max - 0.5.
   const float inv_delta_l = 1.0f / delta_l_m;

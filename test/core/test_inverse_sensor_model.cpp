@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include "stereo_occupancy/inverse_sensor_model.h"
@@ -122,6 +123,19 @@ TEST(LogOddsTable, ProfileEndsAtTheTail) {
   // At the tail the probability is within 1.2 % of the peak height of 0.5.
   EXPECT_GT(p.at(static_cast<float>(p.endRange())), 0.0f);
   EXPECT_LT(m.probability(p.endRange() - 0.125, 10.0, dl) - 0.5, 0.012 * (m.peakProbability(dl) - 0.5));
+}
+
+// A camera of tiny focal length gives rays of huge range and Δl = inf (found
+// by the drawer fuzzer): the profile stays finite, and the cells before such
+// a measurement are free.
+TEST(LogOddsTable, HugeOrUndefinedRangeUncertaintyStaysFinite) {
+  const LogOddsTable table(fig1Model(), 0.25);
+  for (float dl : {std::numeric_limits<float>::infinity(), std::numeric_limits<float>::quiet_NaN(), 1e30f}) {
+    const RangeProfile p = table.profile(2.9e38f, dl);
+    EXPECT_TRUE(std::isfinite(p.samples_per_m) && p.samples_per_m > 0.0f) << dl;
+    EXPECT_TRUE(std::isfinite(p.front_m) && std::isfinite(p.row_origin_m) && std::isfinite(p.tail_m)) << dl;
+    for (float l : {0.0f, 10.0f, 200.0f}) EXPECT_EQ(p.at(l), p.free_log_odds) << dl << " at " << l;
+  }
 }
 
 TEST(InverseSensorModelConfig, Validation) {
