@@ -9,7 +9,7 @@ PACKAGES=(
   ros-base-dev libroscpp-dev ros-message-generation libnodeletlib-dev pluginlib-dev
   libtf2-ros-dev libtf2-msgs-dev libtf2-eigen-dev libimage-transport-dev libcv-bridge-dev
   libstereo-msgs-dev ros-stereo-msgs libsensor-msgs-dev libgeometry-msgs-dev
-  libvisualization-msgs-dev libstd-srvs-dev ros-std-srvs
+  libvisualization-msgs-dev libnav-msgs-dev libstd-srvs-dev ros-std-srvs
   libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure libdiagnostic-updater-dev
   librostest-dev python3-rostest librosbag-dev python3-rosbag rosbash ros-stereo-image-proc libstereo-image-proc-dev
 )

@@ -86,6 +86,17 @@ class MapAccumulator {
   /// Empties the map.
   void reset();
 
+  /// Replaces the map by the one in @p path (.bt: occupied / free, .ot: with
+  /// log-odds), clamped to this map's bounds. The number of updates starts
+  /// at 0. @throws std::runtime_error if the file cannot be read or is of
+  /// another resolution; the map is then unchanged.
+  void load(const std::string& path);
+
+  /// Leaves no occupied cell in the box [W_min, W_max] (metres, in the map's
+  /// frame): each is set to the lower clamping bound, as octomap_server's
+  /// clear_bbx does. Returns how many cells were cleared.
+  size_t clearBox(const Eigen::Vector3d& W_min, const Eigen::Vector3d& W_max);
+
   /// Number of updates integrated since the last reset.
   size_t updates() const { return updates_; }
 

@@ -2,6 +2,7 @@
 
 #include <Eigen/Geometry>
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -50,6 +51,72 @@ void MapAccumulator::reset() {
   updates_ = 0;
   W_recent_origins_.clear();
   next_origin_ = 0;
+}
+
+void MapAccumulator::load(const std::string& path) {
+  std::unique_ptr<octomap::AbstractOcTree> read;
+  if (path.size() > 3 && path.compare(path.size() - 3, 3, ".bt") == 0) {
+    auto binary = std::make_unique<octomap::OcTree>(config_.resolution_m);
+    if (!binary->readBinary(path)) throw std::runtime_error("cannot read '" + path + "' as a binary OctoMap (.bt)");
+    read = std::move(binary);
+  } else {
+    read.reset(octomap::AbstractOcTree::read(path));
+  }
+  const auto* file = dynamic_cast<const octomap::OcTree*>(read.get());
+  if (!file) throw std::runtime_error("cannot read '" + path + "' as an OcTree (.bt or .ot)");
+  if (std::abs(file->getResolution() - config_.resolution_m) > 1e-9 * config_.resolution_m)
+    throw std::runtime_error("'" + path + "' has " + std::to_string(file->getResolution()) +
+                             " m cells, the map " + std::to_string(config_.resolution_m) + " m");
+  auto loaded = std::make_unique<AccumulatingOcTree>(config_.resolution_m);
+  loaded->setClampingThresMin(config_.clamping_min_prob);
+  loaded->setClampingThresMax(config_.clamping_max_prob);
+  const float lo = loaded->getClampingThresMinLog(), hi = loaded->getClampingThresMaxLog();
+  for (auto it = file->begin_leafs(), end = file->end_leafs(); it != end; ++it)
+    loaded->setLeaf(it.getKey(), it.getDepth(), std::clamp(it->getLogOdds(), lo, hi));
+  loaded->updateInnerOccupancy();
+  reset();
+  tree_ = std::move(loaded);
+  applyThresholds();
+}
+
+size_t MapAccumulator::clearBox(const Eigen::Vector3d& W_min, const Eigen::Vector3d& W_max) {
+  tree();  // inner nodes up to date: the box's iterator skips free subtrees by them
+  const octomap::point3d lo(static_cast<float>(W_min.x()), static_cast<float>(W_min.y()),
+                            static_cast<float>(W_min.z()));
+  const octomap::point3d hi(static_cast<float>(W_max.x()), static_cast<float>(W_max.y()),
+                            static_cast<float>(W_max.z()));
+  octomap::OcTreeKey key_lo, key_hi;
+  if (!tree_->coordToKeyChecked(lo, key_lo) || !tree_->coordToKeyChecked(hi, key_hi)) {
+    // Clamp the box to the key range instead of giving up on it.
+    const double edge = tree_->getNodeSize(0) / 2.0 - config_.resolution_m;
+    const Eigen::Vector3d a = W_min.cwiseMax(-edge).cwiseMin(edge), b = W_max.cwiseMax(-edge).cwiseMin(edge);
+    key_lo = tree_->coordToKey(a.x(), a.y(), a.z());
+    key_hi = tree_->coordToKey(b.x(), b.y(), b.z());
+  }
+  // The occupied leaves' cells inside the box; a pruned (coarse) leaf
+  // contributes only the cells the box holds.
+  std::vector<octomap::OcTreeKey> cells;
+  const unsigned depth = tree_->getTreeDepth();
+  for (auto it = tree_->begin_leafs_bbx(key_lo, key_hi), end = tree_->end_leafs_bbx(); it != end; ++it) {
+    if (!tree_->isNodeOccupied(*it)) continue;
+    // The part of the leaf that the box holds, per axis [from, to].
+    const octomap::OcTreeKey first = it.getIndexKey();  // the leaf's lowest key
+    const unsigned side = 1u << (depth - it.getDepth());
+    unsigned from[3], to[3];
+    for (int a = 0; a < 3; ++a) {
+      from[a] = std::max<unsigned>(first[a], key_lo[a]);
+      to[a] = std::min<unsigned>(first[a] + side - 1, key_hi[a]);
+    }
+    for (unsigned z = from[2]; z <= to[2]; ++z)
+      for (unsigned y = from[1]; y <= to[1]; ++y)
+        for (unsigned x = from[0]; x <= to[0]; ++x)
+          cells.emplace_back(static_cast<octomap::key_type>(x), static_cast<octomap::key_type>(y),
+                             static_cast<octomap::key_type>(z));
+  }
+  const float cleared = tree_->getClampingThresMinLog();
+  for (const octomap::OcTreeKey& k : cells) tree_->setNodeValue(k, cleared, /*lazy_eval=*/true);
+  inner_stale_ = inner_stale_ || !cells.empty();
+  return cells.size();
 }
 
 bool MapAccumulator::admits(const GridUpdateView& update, std::string* why) const {

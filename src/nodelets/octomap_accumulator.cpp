@@ -17,6 +17,9 @@
 #include <mutex>
 #include <vector>
 
+#include "stereo_occupancy/BoundingBoxQuery.h"
+#include "stereo_occupancy/GetOctomap.h"
+#include "stereo_occupancy/projected_map.h"
 #include "stereo_occupancy/ros/conversions.h"
 #include "stereo_occupancy/ros/mapping_pipeline.h"
 #include "stereo_occupancy/ros/parameters.h"
@@ -42,6 +45,10 @@ class OctomapAccumulator : public nodelet::Nodelet {
   void updateCallback(const OccupancyUpdateConstPtr& msg);
   void publish(const ros::TimerEvent&);
   bool saveMap(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response);
+  bool clearBox(BoundingBoxQuery::Request& request, BoundingBoxQuery::Response&);
+  /// The map on request: binary (octomap_binary) or with log-odds (octomap_full).
+  bool getMap(bool binary, GetOctomap::Request&, GetOctomap::Response& response);
+  std_msgs::Header mapHeader() const;  ///< requires mutex_
   bool reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
   std::vector<std::string> save();  ///< requires mutex_
@@ -59,8 +66,8 @@ class OctomapAccumulator : public nodelet::Nodelet {
   bool changed_since_publish_ = true;
 
   ros::Subscriber update_sub_;
-  ros::Publisher octomap_pub_, markers_pub_, cloud_pub_;
-  ros::ServiceServer save_srv_, reset_srv_;
+  ros::Publisher octomap_pub_, octomap_full_pub_, markers_pub_, free_markers_pub_, cloud_pub_, projected_pub_;
+  ros::ServiceServer save_srv_, reset_srv_, clear_bbx_srv_, octomap_binary_srv_, octomap_full_srv_;
   ros::Timer publish_timer_, diagnostics_timer_;
   ros::WallTimer save_timer_;
   size_t updates_at_last_save_ = 0;
@@ -76,10 +83,32 @@ void OctomapAccumulator::onInit() {
     return;
   }
   fusion_ = std::make_unique<MapFusion>(params_);
+  if (!params_.map_file.empty()) {
+    try {
+      fusion_->load(params_.map_file);
+    } catch (const std::exception& e) {
+      // The map asked for is not there: starting empty would look like success.
+      NODELET_FATAL("%s: cannot start from map_file: %s; OctomapAccumulator does not start", getName().c_str(),
+                    e.what());
+      fusion_.reset();
+      return;
+    }
+    NODELET_INFO("started from %s: %lu leaves", params_.map_file.c_str(),
+                 static_cast<unsigned long>(fusion_->map().tree().getNumLeafNodes()));
+  }
 
+  // octomap_server's names and types, latched as there.
   octomap_pub_ = nh.advertise<Octomap>("octomap_binary", 1, /*latch=*/true);
+  octomap_full_pub_ = nh.advertise<Octomap>("octomap_full", 1, /*latch=*/true);
   markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>("occupied_cells_vis_array", 1, /*latch=*/true);
+  free_markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>("free_cells_vis_array", 1, /*latch=*/true);
   cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("octomap_point_cloud_centers", 1, /*latch=*/true);
+  projected_pub_ = nh.advertise<nav_msgs::OccupancyGrid>("projected_map", 1, /*latch=*/true);
+  octomap_binary_srv_ = nh.advertiseService<GetOctomap::Request, GetOctomap::Response>(
+      "octomap_binary", [this](GetOctomap::Request& q, GetOctomap::Response& r) { return getMap(true, q, r); });
+  octomap_full_srv_ = nh.advertiseService<GetOctomap::Request, GetOctomap::Response>(
+      "octomap_full", [this](GetOctomap::Request& q, GetOctomap::Response& r) { return getMap(false, q, r); });
+  clear_bbx_srv_ = pnh.advertiseService("clear_bbx", &OctomapAccumulator::clearBox, this);
   update_sub_ = nh.subscribe("occupancy_update", 10, &OctomapAccumulator::updateCallback, this);
   save_srv_ = pnh.advertiseService("save_map", &OctomapAccumulator::saveMap, this);
   reset_srv_ = pnh.advertiseService("reset", &OctomapAccumulator::reset, this);
@@ -163,33 +192,70 @@ void OctomapAccumulator::updateCallback(const OccupancyUpdateConstPtr& msg) {
   changed_since_publish_ = true;
 }
 
-void OctomapAccumulator::publish(const ros::TimerEvent&) {
-  const bool want_map = octomap_pub_.getNumSubscribers() > 0;
-  const bool want_markers = markers_pub_.getNumSubscribers() > 0;
-  const bool want_cloud = cloud_pub_.getNumSubscribers() > 0;
-  if (!want_map && !want_markers && !want_cloud) return;
-  std::lock_guard<std::mutex> lock(mutex_);
-  if (!changed_since_publish_ || fusion_->frameId().empty()) return;
-  changed_since_publish_ = false;
+std_msgs::Header OctomapAccumulator::mapHeader() const {
   std_msgs::Header header;
   header.frame_id = fusion_->frameId();
   header.stamp = fusion_->lastStamp();
+  return header;
+}
+
+void OctomapAccumulator::publish(const ros::TimerEvent&) {
+  // Each output is built only while someone listens: a marker array of a
+  // large map costs more than many updates.
+  const auto wanted = [](const ros::Publisher& pub) { return pub.getNumSubscribers() > 0; };
+  if (!wanted(octomap_pub_) && !wanted(octomap_full_pub_) && !wanted(markers_pub_) && !wanted(free_markers_pub_) &&
+      !wanted(cloud_pub_) && !wanted(projected_pub_))
+    return;
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!changed_since_publish_ || fusion_->frameId().empty()) return;
+  changed_since_publish_ = false;
+  const std_msgs::Header header = mapHeader();
   const octomap::OcTree& tree = fusion_->map().tree();
-  if (want_map) {
+  for (const bool binary : {true, false}) {
+    const ros::Publisher& pub = binary ? octomap_pub_ : octomap_full_pub_;
+    if (!wanted(pub)) continue;
     auto msg = boost::make_shared<Octomap>();
-    toMsg(tree, /*binary=*/true, header, msg.get());
-    octomap_pub_.publish(msg);
+    toMsg(tree, binary, header, msg.get());
+    pub.publish(msg);
   }
-  if (want_markers) {
+  for (const bool occupied : {true, false}) {
+    const ros::Publisher& pub = occupied ? markers_pub_ : free_markers_pub_;
+    if (!wanted(pub)) continue;
     auto msg = boost::make_shared<visualization_msgs::MarkerArray>();
-    occupiedCellMarkers(tree, header, msg.get());
-    markers_pub_.publish(msg);
+    cellMarkers(tree, occupied, header, msg.get());
+    pub.publish(msg);
   }
-  if (want_cloud) {
+  if (wanted(cloud_pub_)) {
     auto msg = boost::make_shared<sensor_msgs::PointCloud2>();
     occupiedCellCloud(tree, header, msg.get());
     cloud_pub_.publish(msg);
   }
+  if (wanted(projected_pub_)) {
+    auto msg = boost::make_shared<nav_msgs::OccupancyGrid>();
+    toMsg(projectOccupancy(tree, params_.projection_min_z_m, params_.projection_max_z_m), header, msg.get());
+    projected_pub_.publish(msg);
+  }
+}
+
+bool OctomapAccumulator::getMap(bool binary, GetOctomap::Request&, GetOctomap::Response& response) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  toMsg(fusion_->map().tree(), binary, mapHeader(), &response.map);
+  return true;
+}
+
+bool OctomapAccumulator::clearBox(BoundingBoxQuery::Request& request, BoundingBoxQuery::Response&) {
+  const Eigen::Vector3d lo(request.min.x, request.min.y, request.min.z);
+  const Eigen::Vector3d hi(request.max.x, request.max.y, request.max.z);
+  if (!lo.allFinite() || !hi.allFinite() || (lo.array() > hi.array()).any()) {
+    NODELET_WARN("clear_bbx: the box must be finite with min <= max; nothing cleared");
+    return false;
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  const size_t cleared = fusion_->clearBox(lo, hi);
+  changed_since_publish_ = true;
+  NODELET_INFO("clear_bbx: cleared %lu occupied cells in [%.2f, %.2f, %.2f] .. [%.2f, %.2f, %.2f]",
+               static_cast<unsigned long>(cleared), lo.x(), lo.y(), lo.z(), hi.x(), hi.y(), hi.z());
+  return true;
 }
 
 std::vector<std::string> OctomapAccumulator::save() {

@@ -189,6 +189,9 @@ void toMsg(const octomap::OcTree& tree, bool binary, const std_msgs::Header& hea
 
 namespace {
 
+/// Opacity of the free cells' markers: the occupied ones show through.
+constexpr float kFreeMarkerAlpha = 0.25f;
+
 /// rviz colour of a cell at height z: hue from blue (z_min) through green to
 /// red (z_max), full saturation, as octomap_server colours its markers.
 std_msgs::ColorRGBA heightColour(double z, double z_min, double z_max) {
@@ -208,35 +211,52 @@ std_msgs::ColorRGBA heightColour(double z, double z_min, double z_max) {
 
 }  // namespace
 
-void occupiedCellMarkers(const octomap::OcTree& tree, const std_msgs::Header& header,
-                         visualization_msgs::MarkerArray* markers) {
+void cellMarkers(const octomap::OcTree& tree, bool occupied, const std_msgs::Header& header,
+                 visualization_msgs::MarkerArray* markers) {
   double x0, y0, z_min, x1, y1, z_max;
   tree.getMetricMin(x0, y0, z_min);
   tree.getMetricMax(x1, y1, z_max);
   const unsigned depth = tree.getTreeDepth();
   markers->markers.assign(depth + 1, visualization_msgs::Marker());
   for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
-    if (!tree.isNodeOccupied(*it)) continue;
+    if (tree.isNodeOccupied(*it) != occupied) continue;
     auto& m = markers->markers[it.getDepth()];
     geometry_msgs::Point p;
     p.x = it.getX();
     p.y = it.getY();
     p.z = it.getZ();
     m.points.push_back(p);
-    m.colors.push_back(heightColour(p.z, z_min, z_max));
+    if (occupied) m.colors.push_back(heightColour(p.z, z_min, z_max));
   }
   for (unsigned d = 0; d <= depth; ++d) {
     auto& m = markers->markers[d];
     m.header = header;
-    m.ns = "occupied_cells";
+    m.ns = occupied ? "occupied_cells" : "free_cells";
     m.id = static_cast<int>(d);
     m.type = visualization_msgs::Marker::CUBE_LIST;
     const double size = tree.getNodeSize(d);
     m.scale.x = m.scale.y = m.scale.z = size;
     m.pose.orientation.w = 1.0;
-    m.color.a = 1.0f;
+    if (occupied) {
+      m.color.a = 1.0f;
+    } else {
+      m.color.g = 1.0f;
+      m.color.a = kFreeMarkerAlpha;
+    }
     m.action = m.points.empty() ? visualization_msgs::Marker::DELETE : visualization_msgs::Marker::ADD;
   }
+}
+
+void toMsg(const ProjectedMap& map, const std_msgs::Header& header, nav_msgs::OccupancyGrid* msg) {
+  msg->header = header;
+  msg->info.map_load_time = header.stamp;
+  msg->info.resolution = static_cast<float>(map.resolution_m);
+  msg->info.width = static_cast<uint32_t>(map.width);
+  msg->info.height = static_cast<uint32_t>(map.height);
+  msg->info.origin.position.x = map.origin_x_m;
+  msg->info.origin.position.y = map.origin_y_m;
+  msg->info.origin.orientation.w = 1.0;
+  msg->data = map.cells;
 }
 
 void occupiedCellCloud(const octomap::OcTree& tree, const std_msgs::Header& header, sensor_msgs::PointCloud2* cloud) {

@@ -35,6 +35,8 @@ bool OctomapAccumulatorParameters::isValid(std::string* why) const {
   if (!parametersInRange(*this, why)) return false;
   if (!isPlainFileName(map_name))
     return fail(why, "map_name must be a plain file name: letters, digits, '_', '-', '.', not starting with '.'");
+  if (!map_file.empty() && world_frame.empty()) return fail(why, "a map_file needs a world_frame (its frame)");
+  if (!(projection_min_z_m < projection_max_z_m)) return fail(why, "projection_min_z_m must be < projection_max_z_m");
   return map.isValid(why);
 }
 

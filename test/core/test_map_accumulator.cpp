@@ -263,3 +263,75 @@ TEST(MapAccumulator, IntegrateEqualsUpdateNodeOverAFlight) {
   EXPECT_EQ(map.tree().size(), plain.size());
   EXPECT_EQ(fullTree(map.tree()), fullTree(plain));
 }
+
+// A saved map loads back: the same leaves and values from the .ot, the same
+// occupancy from the .bt; a file of another resolution or none is refused
+// and the map stays as it was.
+TEST(MapAccumulator, LoadsWhatItSaved) {
+  MapAccumulator map{MapAccumulatorConfig()};
+  integrateTable1Image(DrawingAlgorithm::kLinePyramid, &map);
+  const std::string dir = ::testing::TempDir();
+  const auto paths = map.save(dir, "load_test");
+  MapAccumulator from_ot{MapAccumulatorConfig()}, from_bt{MapAccumulatorConfig()};
+  from_ot.load(paths[1]);
+  EXPECT_EQ(fullTree(from_ot.tree()), fullTree(map.tree()));
+  EXPECT_EQ(from_ot.updates(), 0u);
+  from_bt.load(paths[0]);
+  size_t occupied = 0, agree = 0;
+  for (auto it = map.tree().begin_leafs(), end = map.tree().end_leafs(); it != end; ++it) {
+    if (!map.tree().isNodeOccupied(*it)) continue;
+    ++occupied;
+    const octomap::OcTreeNode* n = from_bt.tree().search(it.getKey());
+    agree += n && from_bt.tree().isNodeOccupied(n);
+  }
+  EXPECT_GT(occupied, 1000u);
+  EXPECT_EQ(agree, occupied);
+
+  MapAccumulatorConfig coarse;
+  coarse.resolution_m = 0.5;
+  MapAccumulator other{coarse};
+  EXPECT_THROW(other.load(paths[1]), std::runtime_error);
+  EXPECT_THROW(from_ot.load(dir + "does_not_exist.ot"), std::runtime_error);
+  EXPECT_EQ(fullTree(from_ot.tree()), fullTree(map.tree()));  // unchanged by the failed load
+  for (const auto& p : paths) std::remove(p.c_str());
+}
+
+// clear_bbx: no occupied cell is left in the box, the cells outside keep
+// their values, and a pruned occupied block that the box cuts keeps its
+// part outside.
+TEST(MapAccumulator, ClearBoxLeavesNothingOccupiedInside) {
+  // A 4 m cube of clamped occupied cells, pruned to coarse leaves, loaded from a file.
+  LocalGrid grid;
+  grid.reset(Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(16, 16, 16), 0.25);
+  octomap::OcTree cube(0.25);
+  for (int z = 0; z < 16; ++z)
+    for (int y = 0; y < 16; ++y)
+      for (int x = 0; x < 16; ++x) {
+        const Eigen::Vector3d p = grid.cellCentre(x, y, z);
+        cube.setNodeValue(p.x(), p.y(), p.z(), cube.getClampingThresMaxLog());
+      }
+  cube.updateInnerOccupancy();
+  cube.prune();
+  ASSERT_LT(cube.getNumLeafNodes(), 16u * 16u * 16u);
+  const std::string path = ::testing::TempDir() + "clear_box_cube.ot";
+  ASSERT_TRUE(cube.write(path));
+  MapAccumulator map{MapAccumulatorConfig()};
+  map.load(path);
+  std::remove(path.c_str());
+  ASSERT_EQ(map.tree().getNumLeafNodes(), cube.getNumLeafNodes());  // coarse leaves, as saved
+  const size_t cleared = map.clearBox(Eigen::Vector3d(0.5, 0.5, 0.5), Eigen::Vector3d(1.49, 1.49, 1.49));
+  EXPECT_EQ(cleared, 4u * 4u * 4u);
+  size_t occupied_inside = 0, occupied_outside = 0;
+  for (int z = 0; z < 16; ++z)
+    for (int y = 0; y < 16; ++y)
+      for (int x = 0; x < 16; ++x) {
+        const Eigen::Vector3d p = grid.cellCentre(x, y, z);
+        const octomap::OcTreeNode* n = map.tree().search(p.x(), p.y(), p.z());
+        ASSERT_NE(n, nullptr);
+        const bool inside = (p.array() > 0.5).all() && (p.array() < 1.5).all();
+        (inside ? occupied_inside : occupied_outside) += map.tree().isNodeOccupied(n);
+      }
+  EXPECT_EQ(occupied_inside, 0u);
+  EXPECT_EQ(occupied_outside, 16u * 16u * 16u - 64u);
+  EXPECT_EQ(map.clearBox(Eigen::Vector3d(0.5, 0.5, 0.5), Eigen::Vector3d(1.49, 1.49, 1.49)), 0u);  // nothing left
+}

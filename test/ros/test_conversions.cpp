@@ -2,7 +2,10 @@
 
 #include <gtest/gtest.h>
 #include <ros/message_traits.h>
+#include <ros/service_traits.h>
 
+#include "stereo_occupancy/BoundingBoxQuery.h"
+#include "stereo_occupancy/GetOctomap.h"
 #include "stereo_occupancy/ros/conversions.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
 
@@ -196,8 +199,54 @@ TEST(Conversions, OctreeToMessageAndBack) {
   EXPECT_TRUE(back.isNodeOccupied(back.search(1.1, 2.2, 0.3)));
   EXPECT_FALSE(back.isNodeOccupied(back.search(-3.0, 0.2, 1.0)));
   visualization_msgs::MarkerArray markers;
-  occupiedCellMarkers(tree, header, &markers);
+  cellMarkers(tree, /*occupied=*/true, header, &markers);
   size_t points = 0;
   for (const auto& m : markers.markers) points += m.points.size();
   EXPECT_EQ(points, 1u);
+  cellMarkers(tree, /*occupied=*/false, header, &markers);
+  points = 0;
+  for (const auto& m : markers.markers) {
+    points += m.points.size();
+    EXPECT_EQ(m.ns, "free_cells");
+    EXPECT_TRUE(m.colors.empty());  // one colour for all
+  }
+  EXPECT_EQ(points, 1u);
+  // The full map keeps the log-odds: binary false, as octomap_server's octomap_full.
+  Octomap full;
+  toMsg(tree, false, header, &full);
+  EXPECT_FALSE(full.binary);
+  EXPECT_EQ(full.id, "OcTree");
+  std::stringstream full_data(std::string(full.data.begin(), full.data.end()));
+  octomap::OcTree full_back(full.resolution);
+  full_back.readData(full_data);
+  ASSERT_NE(full_back.search(1.1, 2.2, 0.3), nullptr);
+  EXPECT_FLOAT_EQ(full_back.search(1.1, 2.2, 0.3)->getLogOdds(), tree.search(1.1, 2.2, 0.3)->getLogOdds());
+}
+
+TEST(Messages, ServicesAreWireCompatibleWithOctomapMsgs) {
+  // octomap_msgs' MD5 sums: octomap_server's clients call ours as they are.
+  EXPECT_STREQ(ros::service_traits::MD5Sum<BoundingBoxQuery>::value(), "93aa3d73b866f04880927745f4aab303");
+  EXPECT_STREQ(ros::service_traits::MD5Sum<GetOctomap>::value(), "be9d2869d24fe40d6bc21ac21f6bb2c5");
+}
+
+TEST(Conversions, ProjectedMapToOccupancyGrid) {
+  ProjectedMap map;
+  map.resolution_m = 0.5;
+  map.origin_x_m = -2.0;
+  map.origin_y_m = 3.5;
+  map.width = 3;
+  map.height = 2;
+  map.cells = {ProjectedMap::kUnknown, ProjectedMap::kFree, ProjectedMap::kOccupied, 0, 0, 100};
+  std_msgs::Header header;
+  header.frame_id = "map";
+  nav_msgs::OccupancyGrid msg;
+  toMsg(map, header, &msg);
+  EXPECT_EQ(msg.header.frame_id, "map");
+  EXPECT_FLOAT_EQ(msg.info.resolution, 0.5f);
+  EXPECT_EQ(msg.info.width, 3u);
+  EXPECT_EQ(msg.info.height, 2u);
+  EXPECT_DOUBLE_EQ(msg.info.origin.position.x, -2.0);
+  EXPECT_DOUBLE_EQ(msg.info.origin.position.y, 3.5);
+  EXPECT_DOUBLE_EQ(msg.info.origin.orientation.w, 1.0);
+  EXPECT_EQ(msg.data, (std::vector<int8_t>{-1, 0, 100, 0, 0, 100}));
 }

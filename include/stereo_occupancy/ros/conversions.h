@@ -3,6 +3,7 @@
 /// The one place that converts between ROS messages and core types.
 
 #include <geometry_msgs/TransformStamped.h>
+#include <nav_msgs/OccupancyGrid.h>
 #include <octomap/OcTree.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/PointCloud2.h>
@@ -16,6 +17,7 @@
 #include "stereo_occupancy/Octomap.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/local_grid.h"
+#include "stereo_occupancy/projected_map.h"
 #include "stereo_occupancy/ros/parameters.h"
 #include "stereo_occupancy/stereo_camera_model.h"
 
@@ -64,9 +66,14 @@ bool viewOf(const OccupancyUpdate& msg, GridUpdateView* view, std::string* why);
 /// content) or full (.ot content, log-odds).
 void toMsg(const octomap::OcTree& tree, bool binary, const std_msgs::Header& header, Octomap* msg);
 
-/// Occupied leaves as cube lists, one marker per leaf size, coloured by height.
-void occupiedCellMarkers(const octomap::OcTree& tree, const std_msgs::Header& header,
-                         visualization_msgs::MarkerArray* markers);
+/// Occupied leaves (@p occupied) or free leaves as cube lists, one marker per
+/// leaf size: occupied ones coloured by height (namespace "occupied_cells"),
+/// free ones a translucent green ("free_cells"), as octomap_server shows them.
+void cellMarkers(const octomap::OcTree& tree, bool occupied, const std_msgs::Header& header,
+                 visualization_msgs::MarkerArray* markers);
+
+/// The projected map as a nav_msgs/OccupancyGrid in the header's frame (z = 0).
+void toMsg(const ProjectedMap& map, const std_msgs::Header& header, nav_msgs::OccupancyGrid* msg);
 
 /// Centres of the occupied leaves as an XYZ cloud.
 void occupiedCellCloud(const octomap::OcTree& tree, const std_msgs::Header& header, sensor_msgs::PointCloud2* cloud);

@@ -121,6 +121,11 @@ class MapFusion {
   const MapAccumulator& map() const { return map_; }
   /// Empties the map (the frame stays).
   void reset();
+  /// Starts over from the map in @p path (MapAccumulator::load).
+  /// @throws std::runtime_error; the map is then unchanged.
+  void load(const std::string& path) { map_.load(path); }
+  /// Leaves no occupied cell in the box (MapAccumulator::clearBox); returns how many were cleared.
+  size_t clearBox(const Eigen::Vector3d& W_min, const Eigen::Vector3d& W_max) { return map_.clearBox(W_min, W_max); }
   /// The map's frame: world_frame, or (world_frame "") the first fused update's; "" before it.
   const std::string& frameId() const { return frame_id_; }
   /// The stamp of the last fused update.

@@ -75,6 +75,10 @@ struct OctomapAccumulatorParameters {
   std::string save_dir;          ///< where ~save_map writes (and the map is saved on shutdown); empty: nowhere
   std::string map_name = "stereo_occupancy_map";  ///< file base name in save_dir
   double save_period_s = 0.0;    ///< also save every this many seconds when the map changed; 0: only on request/shutdown
+  std::string map_file;  ///< a .bt or .ot to start from (octomap_server's map_file); empty: an empty map
+  /// The height band of projected_map (octomap_server's occupancy_min_z / occupancy_max_z) [m].
+  double projection_min_z_m = -10000.0;
+  double projection_max_z_m = 10000.0;
 
   /// The parameters (stereo_occupancy/parameter_table.h): f(spec, member) for each, the map's included.
   template <typename Self, typename F>
@@ -91,9 +95,15 @@ struct OctomapAccumulatorParameters {
     f(textParameter("map_name", "file base name in save_dir: a plain name"), p.map_name);
     f(numberParameter("save_period_s", "s", 0.0, 86400.0, "also save this often while the map changes; 0: never"),
       p.save_period_s);
+    f(textParameter("map_file", "a .bt or .ot to start from; empty: an empty map"), p.map_file);
+    f(numberParameter("projection_min_z_m", "m", -10000.0, 10000.0, "lowest height projected_map sees"),
+      p.projection_min_z_m);
+    f(numberParameter("projection_max_z_m", "m", -10000.0, 10000.0, "highest height projected_map sees"),
+      p.projection_max_z_m);
   }
 
-  /// The ranges of forEachParameter(), a plain map_name, a valid map config.
+  /// The ranges of forEachParameter(), a plain map_name, a world frame for a
+  /// map_file, a projection band of positive height, a valid map config.
   bool isValid(std::string* why) const;
 };
 
