@@ -19,6 +19,7 @@
 
 #include "stereo_occupancy/ros/mapping_pipeline.h"
 #include "stereo_occupancy/ros/parameters.h"
+#include "progress.h"
 
 namespace so = stereo_occupancy;
 using Clock = std::chrono::steady_clock;
@@ -33,6 +34,19 @@ const char* kUsage =
     "Topics default to launch/mapping.launch's: /stereo/disparity and /stereo/left/camera_info.\n"
     "--param takes the nodelets' parameter names (config/mapping.yaml), e.g. algorithm=raytrace.\n";
 
+/// Opens @p path for reading. A bag whose recording did not end cleanly
+/// (a crash, a full disk) has no index, and rosbag cannot read it until
+/// `rosbag reindex` rebuilt it: said so instead of rosbag's "wanted 4 bytes".
+void openBag(const std::string& path, rosbag::Bag* bag) {
+  try {
+    bag->open(path, rosbag::bagmode::Read);
+  } catch (const rosbag::BagException& e) {
+    throw std::runtime_error("cannot read the bag '" + path + "' (" + e.what() +
+                             "); if its recording was cut short it has no index: repair it with "
+                             "'rosbag reindex " + path + "' and run again");
+  }
+}
+
 /// An image waiting for its pose, as in the nodelet's tf2_ros::MessageFilter.
 struct PendingImage {
   stereo_msgs::DisparityImageConstPtr disparity;  ///< or
@@ -40,16 +54,6 @@ struct PendingImage {
   const std_msgs::Header& header() const { return disparity ? disparity->header : depth->header; }
 };
 
-void progress(size_t done, size_t total, double elapsed_s) {
-  const int width = 30;
-  const double f = total ? static_cast<double>(done) / total : 1.0;
-  const double rate = elapsed_s > 0.0 ? done / elapsed_s : 0.0;
-  const double left = rate > 0.0 ? (total - done) / rate : 0.0;
-  std::cerr << "\r[" << std::string(static_cast<size_t>(f * width), '#')
-            << std::string(width - static_cast<size_t>(f * width), ' ') << "] " << done << "/" << total
-            << " frames, " << static_cast<int>(rate) << " frames/s, " << static_cast<int>(left + 0.5) << " s left   "
-            << std::flush;
-}
 
 }  // namespace
 
@@ -100,7 +104,8 @@ int main(int argc, char** argv) {
   if (!values.count("resolution_m")) accumulator.map.resolution_m = mapper.drawing.resolution_m;
 
   try {
-    rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
+    rosbag::Bag bag;
+    openBag(bag_path, &bag);
     const std::string image_topic = depth_topic.empty() ? disparity_topic : depth_topic;
     const std::vector<std::string> topics = {"/tf", "/tf_static", image_topic, info_topic};
     rosbag::View view(bag, rosbag::TopicQuery(topics));
@@ -116,6 +121,7 @@ int main(int argc, char** argv) {
     double mapping_ms = 0.0, fusion_ms = 0.0;
     ros::Time latest_tf;
     const auto start = Clock::now();
+    so::tools::ProgressBar progress(total, "frames");
 
     // Maps the images whose pose has come, in order, at bag time `now`;
     // `flush` (the bag's end): those still waiting are dropped.
@@ -186,12 +192,11 @@ int main(int argc, char** argv) {
           }
         }
         mapPending(m.getTime(), false);
-        progress(read, total, std::chrono::duration<double>(Clock::now() - start).count());
+        progress.update(read);
       }
     }
     mapPending(latest_tf, true);
-    progress(read, total, std::chrono::duration<double>(Clock::now() - start).count());
-    std::cerr << std::endl;
+    progress.finish();
 
     const auto slash = prefix.find_last_of('/');
     const std::string dir = slash == std::string::npos ? "." : prefix.substr(0, slash);

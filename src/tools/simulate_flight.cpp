@@ -20,6 +20,7 @@
 
 #include "stereo_occupancy/ros/conversions.h"
 #include "stereo_occupancy/sim/flight_simulation.h"
+#include "progress.h"
 #include "tool_support.h"
 
 namespace so = stereo_occupancy;
@@ -55,6 +56,7 @@ int run(int argc, char** argv) {
   rosbag::Bag bag(output, rosbag::bagmode::Write);
   bag.setCompression(rosbag::compression::LZ4);
   const ros::Time start(1700000000.0);
+  so::tools::ProgressBar progress(n, "frames");
   std_msgs::String scene;
   scene.data = "scenario " + s.name + " seed " + std::to_string(seed) + "\n" + so::describeScene(s.scene);
   bag.write("/ground_truth/scene", start, scene);
@@ -101,10 +103,11 @@ int run(int argc, char** argv) {
     }
     info.header.stamp = stamp;
     bag.write("/stereo/left/camera_info", stamp + ros::Duration(0.001), info);
-    if (i % 20 == 0) std::cerr << "\rsimulate_flight: " << s.name << " frame " << i + 1 << "/" << n << std::flush;
+    progress.update(static_cast<size_t>(i) + 1);
   }
   bag.close();
-  std::cerr << "\rsimulate_flight: " << s.name << ", " << n << " frames at " << s.frame_rate_hz << " Hz -> "
+  progress.finish();
+  std::cerr << "simulate_flight: " << s.name << ", " << n << " frames at " << s.frame_rate_hz << " Hz -> "
             << output << std::endl;
   return 0;
 }

@@ -115,6 +115,28 @@ TEST(ToolErrors, BagToMapArgumentsAndFiles) {
               1);
 }
 
+// A recording cut short (no index): bag_to_map says how to repair it; into a
+// log its progress is one line, not a carriage return per frame.
+TEST(ToolErrors, BagToMapOnACutBagSaysReindexAndLogsOneProgressLine) {
+  const std::string bag = kTmp + "cut_source.bag", cut = kTmp + "cut.bag";
+  const Result made = run(std::string(SIMULATE_FLIGHT_EXE) + " --scenario posts --frames 10 --output " + bag);
+  ASSERT_EQ(made.status, 0) << made.err;
+  EXPECT_EQ(made.err.find('\r'), std::string::npos) << "simulate_flight drew a bar into a file";
+  std::ifstream in(bag, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  writeFile(cut, bytes.substr(0, bytes.size() / 2));
+  const Result r = run(std::string(BAG_TO_MAP_EXE) + " --bag " + cut + " --output " + kTmp + "cut_map");
+  ASSERT_TRUE(WIFEXITED(r.status));
+  EXPECT_EQ(WEXITSTATUS(r.status), 1) << r.err;
+  EXPECT_NE(r.err.find("rosbag reindex " + cut), std::string::npos) << r.err;
+  const Result whole = run(std::string(BAG_TO_MAP_EXE) + " --bag " + bag + " --output " + kTmp + "whole_map");
+  ASSERT_EQ(whole.status, 0) << whole.err;
+  EXPECT_EQ(whole.err.find('\r'), std::string::npos) << whole.err;
+  EXPECT_NE(whole.err.find("10/10 frames"), std::string::npos) << whole.err;
+  for (const std::string& f : {bag, bag + ".scene.txt", cut, kTmp + "whole_map.bt", kTmp + "whole_map.ot"})
+    std::remove(f.c_str());
+}
+
 // A bag whose good images share the stream with hostile ones: the hostile ones
 // are refused one by one, the good ones mapped.
 TEST(ToolErrors, BagToMapSkipsHostileImages) {
