@@ -10,6 +10,7 @@
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
 
+#include <cstdint>
 #include <limits>
 #include <string>
 
@@ -35,6 +36,17 @@ struct StereoCameraConfig {
   bool isValid(std::string* why = nullptr) const;
   bool operator==(const StereoCameraConfig& o) const;
   bool operator!=(const StereoCameraConfig& o) const { return !(*this == o); }
+};
+
+/// What the pixels of one disparity image hold: why an image may map nothing.
+struct DisparityCensus {
+  uint64_t no_match = 0;      ///< NaN, infinite or negative: the matcher found nothing
+  uint64_t out_of_range = 0;  ///< outside [min_disparity_px, nearDisparity()]: the search range, or nearer than min_range_m
+  uint64_t beyond_range = 0;  ///< 0 < d < farDisparity(): beyond max_range_m (free space up to it)
+  uint64_t sky = 0;           ///< 0: infinitely far (free space up to max_range_m)
+  uint64_t measured = 0;      ///< a range within [min_range_m, max_range_m]
+
+  uint64_t total() const { return no_match + out_of_range + beyond_range + sky + measured; }
 };
 
 /// Pinhole stereo model of section III.
@@ -96,6 +108,10 @@ class StereoCameraModel {
     }
   };
   DisparityValidity validity() const { return DisparityValidity{min_valid_, max_valid_}; }
+
+  /// Counts @p disparity's pixels (CV_32FC1) by what they hold: one pass,
+  /// for the diagnosis of an image that mapped nothing.
+  DisparityCensus census(const cv::Mat& disparity) const;
 
  private:
   StereoCameraConfig config_;

@@ -58,6 +58,29 @@ double StereoCameraModel::nearDisparity() const {
   return std::min(config_.max_disparity_px, bf_ / config_.min_range_m);
 }
 
+DisparityCensus StereoCameraModel::census(const cv::Mat& disparity) const {
+  CV_Assert(disparity.type() == CV_32FC1);
+  DisparityCensus c;
+  const float far = static_cast<float>(far_disparity_px_);
+  for (int y = 0; y < disparity.rows; ++y) {
+    const float* row = disparity.ptr<float>(y);
+    for (int x = 0; x < disparity.cols; ++x) {
+      const float d = row[x];
+      if (!std::isfinite(d) || d < 0.0f)
+        ++c.no_match;
+      else if (d == 0.0f)
+        ++c.sky;
+      else if (!isValidDisparity(d))
+        ++c.out_of_range;
+      else if (d < far)
+        ++c.beyond_range;
+      else
+        ++c.measured;
+    }
+  }
+  return c;
+}
+
 void depthToDisparity(const cv::Mat& depth, double bf_px_m, cv::Mat* disparity) {
   if (depth.type() != CV_16UC1 && depth.type() != CV_32FC1)
     throw std::invalid_argument("depth image must be 16UC1 (mm) or 32FC1 (m)");

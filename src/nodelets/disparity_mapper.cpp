@@ -351,6 +351,11 @@ void DisparityMapper::process(const char* what, MapImage&& map_image) {
       NODELET_WARN_THROTTLE(kWarnThrottleS, "refused a %s: %s", what, result.why.c_str());
     return;
   }
+  if (result.mapped_nothing) {
+    last_problem_ = result.why;
+    NODELET_WARN_THROTTLE(kWarnThrottleS, "%s (%lu such images so far)", result.why.c_str(),
+                          static_cast<unsigned long>(mapping_->counters().mapped_nothing));
+  }
   update_pub_.publish(update);  // as Ptr: no copy to nodelets in the same manager
   if (cloud_pub_.getNumSubscribers() > 0) {
     auto cloud = boost::make_shared<sensor_msgs::PointCloud2>();
@@ -368,7 +373,7 @@ void DisparityMapper::process(const char* what, MapImage&& map_image) {
 void DisparityMapper::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   std::lock_guard<std::mutex> lock(mutex_);
   const FrameCounters& n = mapping_->counters();
-  const bool dropping = n.no_transform + filter_dropped_ + n.refused > 0;
+  const bool dropping = n.no_transform + filter_dropped_ + n.refused + n.mapped_nothing > 0;
   if (!mapping_->refusedSetup().empty())
     status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "cannot map with this camera: " + mapping_->refusedSetup());
   else
@@ -380,6 +385,7 @@ void DisparityMapper::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
   status.add("images processed", n.mapped);
   status.add("dropped: no transform", n.no_transform + filter_dropped_);
   status.add("dropped: invalid input", n.refused);
+  status.add("mapped nothing", n.mapped_nothing);
   status.add("time jumps back", time_jumps_back_);
   status.add("last processing time [ms]", last_processing_ms_);
   status.add("max processing time [ms]", max_processing_ms_);

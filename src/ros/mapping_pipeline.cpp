@@ -5,11 +5,31 @@
 
 #include <boost/make_shared.hpp>
 
+#include <sstream>
 #include <utility>
 
 #include "stereo_occupancy/ros/conversions.h"
 
 namespace stereo_occupancy {
+
+namespace {
+
+/// Why an image gave an empty update: what its pixels hold, against the camera's limits.
+std::string mappedNothingWhy(const StereoCameraModel& camera, const cv::Mat& disparity) {
+  const DisparityCensus c = camera.census(disparity);
+  const StereoCameraConfig& cfg = camera.config();
+  std::ostringstream why;
+  why << "the image mapped nothing: of its " << c.total() << " pixels " << c.no_match << " have no match, "
+      << c.out_of_range << " lie outside the valid disparities [" << cfg.min_disparity_px << ", "
+      << camera.nearDisparity() << "] px (the message's min_disparity / max_disparity and min_range_m), "
+      << c.beyond_range + c.sky << " are beyond max_range_m = " << cfg.max_range_m << " m or sky, " << c.measured
+      << " measure a range";
+  if (c.out_of_range > c.measured)
+    why << "; are the cameras' principal points or the matcher's disparity range set as the images need?";
+  return why.str();
+}
+
+}  // namespace
 
 FrameMapping::FrameMapping(const DisparityMapperParameters& params) : params_(params) {}
 
@@ -109,6 +129,11 @@ OccupancyUpdatePtr FrameMapping::mapDisparity(const cv::Mat& disparity, const st
   toMsg(std::move(update), out_header, msg.get());
   ++counters_.mapped;
   result->outcome = FrameOutcome::kMapped;
+  if (msg->log_odds.empty()) {
+    ++counters_.mapped_nothing;
+    result->mapped_nothing = true;
+    result->why = mappedNothingWhy(drawer->camera(), disparity);
+  }
   return msg;
 }
 

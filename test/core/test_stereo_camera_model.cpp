@@ -120,3 +120,21 @@ TEST(StereoCameraModel, DepthImageToDisparityEq1) {
   for (int x = 1; x < 4; ++x) EXPECT_TRUE(std::isnan(d.at<float>(0, x))) << x;
   EXPECT_THROW(stereo_occupancy::depthToDisparity(cv::Mat(1, 1, CV_8UC1), bf, &d), std::invalid_argument);
 }
+
+// The census of an image's pixels: what an image that maps nothing holds.
+TEST(StereoCameraModel, CensusCountsWhatThePixelsHold) {
+  StereoCameraConfig cfg;  // b = 0.3 m, f = 700 px: far disparity 210 / 25 = 8.4 px
+  cfg.min_disparity_px = 1.0;
+  cfg.max_disparity_px = 64.0;
+  const StereoCameraModel camera(cfg);
+  cv::Mat d(1, 7, CV_32FC1);
+  const float values[7] = {std::numeric_limits<float>::quiet_NaN(), -1.0f, 0.0f, 0.5f, 4.0f, 20.0f, 100.0f};
+  for (int x = 0; x < 7; ++x) d.at<float>(0, x) = values[x];
+  const stereo_occupancy::DisparityCensus c = camera.census(d);
+  EXPECT_EQ(c.no_match, 2u);      // NaN, -1
+  EXPECT_EQ(c.sky, 1u);           // 0
+  EXPECT_EQ(c.out_of_range, 2u);  // 0.5 below the search range, 100 above it
+  EXPECT_EQ(c.beyond_range, 1u);  // 4 px: 52 m
+  EXPECT_EQ(c.measured, 1u);      // 20 px: 10.5 m
+  EXPECT_EQ(c.total(), 7u);
+}

@@ -93,6 +93,28 @@ TEST_F(PipelineTest, PosesLateOrMissingAndStampZeroAreNotMapped) {
   EXPECT_EQ(mapping.counters().mapped, 0u);
 }
 
+// Disparities outside the message's [min_disparity, max_disparity] (as when
+// the two cameras' principal points differ) map nothing: said, with the
+// counts, and counted.
+TEST_F(PipelineTest, AnImageThatMapsNothingSaysWhy) {
+  FrameMapping mapping{DisparityMapperParameters()};
+  // A matcher's image: no sky, every pixel 12 m away (17.5 px), but a message claiming [0, 5] px.
+  auto narrow = boost::make_shared<stereo_msgs::DisparityImage>(*frame(10.0));
+  toDisparityImageMsg(cv::Mat(480, 640, CV_32FC1, cv::Scalar(17.5f)), narrow->header, StereoCameraConfig(), 5.0,
+                      1.0 / 16.0, narrow.get());
+  FrameResult result;
+  const OccupancyUpdatePtr update = mapping.map(narrow, nullptr, tf_, ros::Time(10.0), &result);
+  ASSERT_TRUE(update) << result.why;
+  EXPECT_TRUE(update->log_odds.empty());
+  EXPECT_TRUE(result.mapped_nothing);
+  EXPECT_NE(result.why.find("outside the valid disparities [0, 5] px"), std::string::npos) << result.why;
+  EXPECT_EQ(mapping.counters().mapped_nothing, 1u);
+  FrameResult good;
+  ASSERT_TRUE(mapping.map(frame(11.0), nullptr, tf_, ros::Time(11.0), &good));
+  EXPECT_FALSE(good.mapped_nothing);
+  EXPECT_EQ(mapping.counters().mapped_nothing, 1u);
+}
+
 // A camera the drawer refuses is tried once and reported once; its images
 // are refused with the same reason until the parameters change.
 TEST_F(PipelineTest, ARefusedCameraSetUpIsReportedOnce) {

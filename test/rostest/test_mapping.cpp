@@ -487,6 +487,19 @@ TEST_F(MappingTest, BadInputIsRefusedAndTheNextImageWorks) {
   update_pub.publish(bad);
   ros::WallDuration(0.5).sleep();
 
+  // An image whose disparities all lie outside the message's range maps
+  // nothing: published empty, counted and warned about (checked below).
+  const ros::Time narrow_stamp = next();
+  tf_.sendTransform(toTransformMsg(T_W_C_, narrow_stamp, "map", "camera_optical"));
+  auto narrow = makeFrame(narrow_stamp, "camera_optical", cv::Mat(480, 640, CV_32FC1, cv::Scalar(17.5f)));
+  narrow->max_disparity = 5.0f;
+  disparity_pub_.publish(narrow);
+  ASSERT_TRUE(waitFor([&] { return updates_.back()->header.stamp == narrow_stamp; }, 20.0));
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    EXPECT_TRUE(updates_.back()->log_odds.empty());
+  }
+
   // Stamps going back by 3 s (a looping bag): warned, the old poses cleared,
   // then mapping goes on.
   const ros::Time back = ros::Time::now();
@@ -500,6 +513,7 @@ TEST_F(MappingTest, BadInputIsRefusedAndTheNextImageWorks) {
   const std::map<std::string, std::string> diag = mapperDiagnostics();
   EXPECT_EQ(added(diag, "time jumps back"), 1);
   EXPECT_EQ(added(diag, "dropped: invalid input"), 15);  // the 13 malformed messages and the 2 too-fine cameras
+  EXPECT_EQ(added(diag, "mapped nothing"), 1);
   {
     std::lock_guard<std::mutex> lock(mutex_);
     EXPECT_EQ(too_fine_errors, 1);

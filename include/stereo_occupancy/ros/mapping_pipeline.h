@@ -39,6 +39,9 @@ struct FrameResult {
   /// The camera set-up was refused for the first time: worth an error (later
   /// images of the same set-up are refused silently, with the same why).
   bool setup_refused_now = false;
+  /// kMapped, but no pixel said anything (the update is empty): why names
+  /// the pixels' counts and the message's disparity range.
+  bool mapped_nothing = false;
 };
 
 /// Images given to FrameMapping and what became of them.
@@ -47,6 +50,7 @@ struct FrameCounters {
   uint64_t mapped = 0;
   uint64_t no_transform = 0;
   uint64_t refused = 0;
+  uint64_t mapped_nothing = 0;  ///< mapped, but with an empty update (FrameResult::mapped_nothing)
 };
 
 /// Image + camera + pose -> checks -> draw (DisparityDrawer) -> update.
