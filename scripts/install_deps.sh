@@ -12,6 +12,7 @@ PACKAGES=(
   libvisualization-msgs-dev libnav-msgs-dev libstd-srvs-dev ros-std-srvs
   libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure libdiagnostic-updater-dev
   librostest-dev python3-rostest librosbag-dev python3-rosbag rosbash ros-stereo-image-proc libstereo-image-proc-dev
+  opencv-doc  # the Middlebury "Aloe" stereo pair of test/rostest/stereo_pipeline.test
 )
 
 missing=()
