@@ -8,6 +8,7 @@
 #
 #   SCENARIO=posts|houses|forest|wires (default posts)   SEED=1   OUT=build/demo
 #   CONFIG=<parameters file> (default config/mapping.yaml)
+#   UPDATE_DOCS=1: also copy the two views to docs/demo_<scenario>_map_{top,side}.png
 set -euo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 ws="${WS:-$repo/build/ws}"
@@ -67,4 +68,8 @@ echo "    surface called free      $(pct "$(q surface_called_free_fraction)")"
 echo "    free-space coverage      $(pct "$(q free_coverage)")  (of the truly empty cells the rays crossed)"
 echo "  views:        $out/${scenario}_map_top.png, $out/${scenario}_map_side.png"
 echo "  log:          $out/replay_$scenario.log"
+if [ "${UPDATE_DOCS:-0}" = 1 ]; then
+  cp "$out/${scenario}_map_top.png" "$repo/docs/demo_${scenario}_map_top.png"
+  cp "$out/${scenario}_map_side.png" "$repo/docs/demo_${scenario}_map_side.png"
+fi
 echo "map: $map"
