@@ -13,6 +13,7 @@ PACKAGES=(
   libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure libdiagnostic-updater-dev
   librostest-dev python3-rostest librosbag-dev python3-rosbag rosbash ros-stereo-image-proc libstereo-image-proc-dev
   opencv-doc  # the Middlebury "Aloe" stereo pair of test/rostest/stereo_pipeline.test
+  rviz xvfb xauth imagemagick  # scripts/render_rviz.sh: rviz headless, a screenshot
 )
 
 missing=()

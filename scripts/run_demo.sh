@@ -8,7 +8,8 @@
 #
 #   SCENARIO=posts|houses|forest|wires (default posts)   SEED=1   OUT=build/demo
 #   CONFIG=<parameters file> (default config/mapping.yaml)
-#   UPDATE_DOCS=1: also copy the two views to docs/demo_<scenario>_map_{top,side}.png
+#   UPDATE_DOCS=1: also copy the two views and rviz's screenshot to docs/ (demo_<scenario>_map_{top,side}.png,
+#   rviz_<scenario>.png)
 set -euo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 ws="${WS:-$repo/build/ws}"
@@ -68,8 +69,12 @@ echo "    surface called free      $(pct "$(q surface_called_free_fraction)")"
 echo "    free-space coverage      $(pct "$(q free_coverage)")  (of the truly empty cells the rays crossed)"
 echo "  views:        $out/${scenario}_map_top.png, $out/${scenario}_map_side.png"
 echo "  log:          $out/replay_$scenario.log"
+# The map as rviz shows it (rviz/mapping.rviz, headless): a second replay.
+rviz_line="$(BAG="$bag" OUT="$out/rviz_$scenario.png" "$repo/scripts/render_rviz.sh" 2>&1 | tail -1 || true)"
+echo "  rviz:         ${rviz_line#render_rviz: }"
 if [ "${UPDATE_DOCS:-0}" = 1 ]; then
   cp "$out/${scenario}_map_top.png" "$repo/docs/demo_${scenario}_map_top.png"
   cp "$out/${scenario}_map_side.png" "$repo/docs/demo_${scenario}_map_side.png"
+  cp "$out/rviz_$scenario.png" "$repo/docs/rviz_$scenario.png"
 fi
 echo "map: $map"

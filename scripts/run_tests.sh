@@ -24,6 +24,11 @@ fuzz_status=$?
 # One pipeline: bag_to_map and the nodelets give byte-identical maps.
 RESULTS="$results" "$repo/scripts/check_online_offline.sh"
 online_offline_status=$?
+# The shipped rviz config, headless, during a replay of that flight: loads
+# without an error and shows the map.
+RESULTS="$results" BAG="$repo/build/online_offline/flight.bag" OUT="$repo/build/rviz/rviz_test.png" \
+  "$repo/scripts/render_rviz.sh"
+rviz_status=$?
 
 summary="$(catkin_test_results build/test_results --verbose)"
 status=$?
@@ -36,5 +41,7 @@ failed=$(cat build/test_results/*/*.xml | grep -oE '<(failure|error)[ >]' | wc -
 [ $sanitize_status = 0 ] || failed=$((failed + 1))
 [ $fuzz_status = 0 ] || [ -f "$results/fuzz.xml" ] || failed=$((failed + 1))
 [ $online_offline_status = 0 ] || [ -f "$results/online_offline.xml" ] || failed=$((failed + 1))
+[ $rviz_status = 0 ] || [ -f "$results/rviz.xml" ] || failed=$((failed + 1))
 echo "tests: $((cases - failed)) passed, $failed failed"
-[ $status = 0 ] && [ $sanitize_status = 0 ] && [ $fuzz_status = 0 ] && [ $online_offline_status = 0 ]
+[ $status = 0 ] && [ $sanitize_status = 0 ] && [ $fuzz_status = 0 ] && [ $online_offline_status = 0 ] &&
+  [ $rviz_status = 0 ]
