@@ -53,28 +53,43 @@ quality="${quality%%\"bands\"*}"  # the whole map's scores (the range bands repe
 q() { echo "$quality" | sed -n "s/.*\"$1\": \([0-9.e+-]*\).*/\1/p"; }
 pct() { awk -v v="$1" 'BEGIN { printf "%.1f %%", 100 * v }'; }
 
-echo
 algorithm="$(echo "$summary" | sed -n 's/.*algorithm=\([a-z_]*\).*/\1/p')"
-echo "stereo_occupancy demo: scenario '$scenario' (seed $seed), $algorithm at $(field resolution_m) m, 25 m range"
-echo "  frames:       $(field images_received) received, $(field images_processed) mapped, $(field dropped_no_transform) dropped (no pose), $(field dropped_invalid) refused"
-echo "  ms per frame: $(field ms_per_image_mean) mean, $(field ms_per_image_median) median, $(field ms_per_image_p99) p99, $(field ms_per_image_max) max (draw + blur + encode + publish)"
-echo "  cpu ms:       $(field cpu_ms_per_image_median) median, $(field cpu_ms_per_image_p99) p99 (the same span in the mapper thread's CPU time, without waits for a core)"
-echo "  fusion ms:    $(summary="$accumulator" field fusion_ms_median) median, $(summary="$accumulator" field fusion_ms_p99) p99, $(summary="$accumulator" field fusion_ms_max) max (one update into the OctoMap, accumulator)"
-echo "  map quality against the ground truth (within one cell):"
-echo "    occupied precision       $(pct "$(q occupied_precision)")  ($(q occupied_at_surface) of $(q occupied_cells) occupied cells at a true surface)"
-echo "    occupied recall          $(pct "$(q occupied_recall)")  ($(q surface_found) of $(q truth_surface_cells) observed surface cells)"
-echo "    phantom obstacles        $(pct "$(q phantom_share)")  ($(q occupied_phantom) occupied cells in free air, more than a cell from any surface)"
-echo "    F1                       $(q f1)"
-echo "    surface called free      $(pct "$(q surface_called_free_fraction)")"
-echo "    free-space coverage      $(pct "$(q free_coverage)")  (of the truly empty cells the rays crossed)"
-echo "  views:        $out/${scenario}_map_top.png, $out/${scenario}_map_side.png"
-echo "  log:          $out/replay_$scenario.log"
 # The map as rviz shows it (rviz/mapping.rviz, headless): a second replay.
 rviz_line="$(BAG="$bag" OUT="$out/rviz_$scenario.png" "$repo/scripts/render_rviz.sh" 2>&1 | tail -1 || true)"
-echo "  rviz:         ${rviz_line#render_rviz: }"
+report() {
+  echo "stereo_occupancy demo: scenario '$scenario' (seed $seed), $algorithm at $(field resolution_m) m, 25 m range"
+  echo "  frames:       $(field images_received) received, $(field images_processed) mapped, $(field dropped_no_transform) dropped (no pose), $(field dropped_invalid) refused"
+  echo "  ms per frame: $(field ms_per_image_mean) mean, $(field ms_per_image_median) median, $(field ms_per_image_p99) p99, $(field ms_per_image_max) max (draw + blur + encode + publish)"
+  echo "  cpu ms:       $(field cpu_ms_per_image_median) median, $(field cpu_ms_per_image_p99) p99 (the same span in the mapper thread's CPU time, without waits for a core)"
+  echo "  fusion ms:    $(summary="$accumulator" field fusion_ms_median) median, $(summary="$accumulator" field fusion_ms_p99) p99, $(summary="$accumulator" field fusion_ms_max) max (one update into the OctoMap, accumulator)"
+  echo "  map quality against the ground truth (within one cell):"
+  echo "    occupied precision       $(pct "$(q occupied_precision)")  ($(q occupied_at_surface) of $(q occupied_cells) occupied cells at a true surface)"
+  echo "    occupied recall          $(pct "$(q occupied_recall)")  ($(q surface_found) of $(q truth_surface_cells) observed surface cells)"
+  echo "    phantom obstacles        $(pct "$(q phantom_share)")  ($(q occupied_phantom) occupied cells in free air, more than a cell from any surface)"
+  echo "    F1                       $(q f1)"
+  echo "    surface called free      $(pct "$(q surface_called_free_fraction)")"
+  echo "    free-space coverage      $(pct "$(q free_coverage)")  (of the truly empty cells the rays crossed)"
+  echo "  views:        $out/${scenario}_map_top.png, $out/${scenario}_map_side.png"
+  echo "  rviz:         ${rviz_line#render_rviz: }"
+  echo "  log:          $out/replay_$scenario.log"
+  echo "map: $map"
+}
+echo
+report
 if [ "${UPDATE_DOCS:-0}" = 1 ]; then
   cp "$out/${scenario}_map_top.png" "$repo/docs/demo_${scenario}_map_top.png"
   cp "$out/${scenario}_map_side.png" "$repo/docs/demo_${scenario}_map_side.png"
   cp "$out/rviz_$scenario.png" "$repo/docs/rviz_$scenario.png"
+  {
+    echo "# The demo's output"
+    echo
+    echo "Written by \`UPDATE_DOCS=1 scripts/run_demo.sh\` (scenario \`$scenario\`, $(date -u +%Y-%m-%d)), with the"
+    echo "pictures beside it: [top](demo_${scenario}_map_top.png), [side](demo_${scenario}_map_side.png),"
+    echo "[rviz](rviz_$scenario.png). Times are this machine's (2 cores, shared)."
+    echo
+    echo '```'
+    report | sed "s|$repo/||g"
+    echo '```'
+  } >"$repo/docs/demo_output.md"
 fi
-echo "map: $map"
+

@@ -29,6 +29,9 @@ online_offline_status=$?
 RESULTS="$results" BAG="$repo/build/online_offline/flight.bag" OUT="$repo/build/rviz/rviz_test.png" \
   "$repo/scripts/render_rviz.sh"
 rviz_status=$?
+# The README and docs/: links resolve, commands name what exists.
+RESULTS="$results" "$repo/scripts/check_docs.sh"
+docs_status=$?
 
 summary="$(catkin_test_results build/test_results --verbose)"
 status=$?
@@ -42,6 +45,7 @@ failed=$(cat build/test_results/*/*.xml | grep -oE '<(failure|error)[ >]' | wc -
 [ $fuzz_status = 0 ] || [ -f "$results/fuzz.xml" ] || failed=$((failed + 1))
 [ $online_offline_status = 0 ] || [ -f "$results/online_offline.xml" ] || failed=$((failed + 1))
 [ $rviz_status = 0 ] || [ -f "$results/rviz.xml" ] || failed=$((failed + 1))
+[ $docs_status = 0 ] || [ -f "$results/docs.xml" ] || failed=$((failed + 1))
 echo "tests: $((cases - failed)) passed, $failed failed"
 [ $status = 0 ] && [ $sanitize_status = 0 ] && [ $fuzz_status = 0 ] && [ $online_offline_status = 0 ] &&
-  [ $rviz_status = 0 ]
+  [ $rviz_status = 0 ] && [ $docs_status = 0 ]
