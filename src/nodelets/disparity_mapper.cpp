@@ -356,6 +356,7 @@ void DisparityMapper::process(const char* what, MapImage&& map_image) {
     NODELET_WARN_THROTTLE(kWarnThrottleS, "%s (%lu such images so far)", result.why.c_str(),
                           static_cast<unsigned long>(mapping_->counters().mapped_nothing));
   }
+  update->source = getName();  // nodelets in one manager share a node name
   update_pub_.publish(update);  // as Ptr: no copy to nodelets in the same manager
   if (cloud_pub_.getNumSubscribers() > 0) {
     auto cloud = boost::make_shared<sensor_msgs::PointCloud2>();

@@ -42,7 +42,7 @@ class OctomapAccumulator : public nodelet::Nodelet {
 
  private:
   void onInit() override;
-  void updateCallback(const OccupancyUpdateConstPtr& msg);
+  void updateCallback(const ros::MessageEvent<const OccupancyUpdate>& event);
   void publish(const ros::TimerEvent&);
   bool saveMap(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response);
   bool clearBox(BoundingBoxQuery::Request& request, BoundingBoxQuery::Response&);
@@ -109,7 +109,11 @@ void OctomapAccumulator::onInit() {
   octomap_full_srv_ = nh.advertiseService<GetOctomap::Request, GetOctomap::Response>(
       "octomap_full", [this](GetOctomap::Request& q, GetOctomap::Response& r) { return getMap(false, q, r); });
   clear_bbx_srv_ = pnh.advertiseService("clear_bbx", &OctomapAccumulator::clearBox, this);
-  update_sub_ = nh.subscribe("occupancy_update", 10, &OctomapAccumulator::updateCallback, this);
+  // A queue deep enough to hold the updates that arrive while a large map is
+  // published; what still overflows shows as a gap in the mappers' sequence
+  // numbers, counted and warned about.
+  update_sub_ = nh.subscribe("occupancy_update", static_cast<uint32_t>(params_.update_queue_size),
+                             &OctomapAccumulator::updateCallback, this);
   save_srv_ = pnh.advertiseService("save_map", &OctomapAccumulator::saveMap, this);
   reset_srv_ = pnh.advertiseService("reset", &OctomapAccumulator::reset, this);
   publish_timer_ = nh.createTimer(ros::Duration(1.0 / params_.publish_rate_hz), &OctomapAccumulator::publish, this);
@@ -146,10 +150,11 @@ OctomapAccumulator::~OctomapAccumulator() {
     // One line for scripts, on stderr (rosconsole may be gone at shutdown).
     const TimeStatistics fusion = TimeStatistics::of(fusion_ms_);
     std::fprintf(stderr,
-                 "OctomapAccumulator summary: updates_received=%lu updates_refused=%lu fusion_ms_median=%.3f "
-                 "fusion_ms_p99=%.3f fusion_ms_max=%.3f\n",
+                 "OctomapAccumulator summary: updates_received=%lu updates_refused=%lu updates_lost=%lu "
+                 "fusion_ms_median=%.3f fusion_ms_p99=%.3f fusion_ms_max=%.3f\n",
                  static_cast<unsigned long>(fusion_->counters().received),
                  static_cast<unsigned long>(fusion_->counters().refused),
+                 static_cast<unsigned long>(fusion_->counters().lost),
                  fusion.median_ms, fusion.p99_ms, fusion.max_ms);
   }
   if (!fusion_ || params_.save_dir.empty()) return;
@@ -164,20 +169,30 @@ OctomapAccumulator::~OctomapAccumulator() {
   }
 }
 
-void OctomapAccumulator::updateCallback(const OccupancyUpdateConstPtr& msg) {
+void OctomapAccumulator::updateCallback(const ros::MessageEvent<const OccupancyUpdate>& event) {
   // Any node may publish on this topic: MapFusion checks everything before
   // the map is touched, and nothing may leave the callback (it would end the manager).
+  const OccupancyUpdateConstPtr& msg = event.getConstMessage();
   std::lock_guard<std::mutex> lock(mutex_);
   const bool frame_chosen = !fusion_->frameId().empty();
+  const uint64_t lost_before = fusion_->counters().lost;
   std::string why;
   const auto start = std::chrono::steady_clock::now();
   bool fused = false;
   try {
-    fused = fusion_->fuse(*msg, &why);  // reads the message in place
+    fused = fusion_->fuse(*msg, &why, event.getPublisherName());  // reads the message in place
   } catch (const std::exception& e) {
     // admits() bounds what an update may allocate; what is left is the map's
     // own growth running out of memory, which keeps the cells fused so far.
     why = std::string("fusion failed: ") + e.what();
+  }
+  if (fusion_->counters().lost > lost_before) {
+    last_problem_ = "updates lost before they reached the map";
+    NODELET_WARN_THROTTLE(kWarnThrottleS, "%lu updates from %s never arrived (%lu lost so far): the accumulator "
+                          "fell behind (a large map published under the lock?) or the link drops them; "
+                          "update_queue_size is %d", static_cast<unsigned long>(fusion_->counters().lost - lost_before),
+                          event.getPublisherName().c_str(), static_cast<unsigned long>(fusion_->counters().lost),
+                          params_.update_queue_size);
   }
   if (!fused) {
     last_problem_ = "refused an update: " + why;
@@ -302,11 +317,13 @@ void OctomapAccumulator::diagnose(diagnostic_updater::DiagnosticStatusWrapper& s
   if (last_save_failed_)
     status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, last_problem_);
   else
-    status.summary(n.refused > 0 ? diagnostic_msgs::DiagnosticStatus::WARN : diagnostic_msgs::DiagnosticStatus::OK,
-                   n.refused > 0 ? last_problem_ : "accumulating");
+    status.summary(n.refused + n.lost > 0 ? diagnostic_msgs::DiagnosticStatus::WARN
+                                          : diagnostic_msgs::DiagnosticStatus::OK,
+                   n.refused + n.lost > 0 ? last_problem_ : "accumulating");
   status.add("frame", fusion_->frameId());
   status.add("updates received", n.received);
   status.add("updates refused", n.refused);
+  status.add("updates lost", n.lost);
   status.add("saves failed", saves_failed_);
   status.add("leaves", fusion_->map().tree().getNumLeafNodes());
   status.add("leaves pruned (max_extent_m)", n.leaves_pruned);

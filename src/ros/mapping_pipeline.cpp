@@ -128,6 +128,7 @@ OccupancyUpdatePtr FrameMapping::mapDisparity(const cv::Mat& disparity, const st
   out_header.frame_id = params_.world_frame;
   toMsg(std::move(update), out_header, msg.get());
   ++counters_.mapped;
+  msg->sequence = counters_.mapped;  // the accumulator counts the gaps
   result->outcome = FrameOutcome::kMapped;
   if (msg->log_odds.empty()) {
     ++counters_.mapped_nothing;
@@ -165,8 +166,9 @@ bool MapFusion::refuse(const std::string& text, std::string* why) {
   return false;
 }
 
-bool MapFusion::fuse(const OccupancyUpdate& msg, std::string* why) {
+bool MapFusion::fuse(const OccupancyUpdate& msg, std::string* why, const std::string& publisher) {
   ++counters_.received;
+  countLost(msg, publisher);
   if (!frame_id_.empty() && msg.header.frame_id != frame_id_)
     return refuse("frame '" + msg.header.frame_id + "', the map is in '" + frame_id_ + "'", why);
   GridUpdateView update;
@@ -181,6 +183,16 @@ bool MapFusion::fuse(const OccupancyUpdate& msg, std::string* why) {
     last_prune_ = last_stamp_;
   }
   return true;
+}
+
+void MapFusion::countLost(const OccupancyUpdate& msg, const std::string& publisher) {
+  if (msg.sequence == 0) return;  // not counted by its source
+  // Nodelets in one manager share its node name: the source tells them apart.
+  uint64_t& last = last_sequence_[publisher + " " + msg.source];
+  const uint64_t sequence = msg.sequence;
+  // A sequence that goes back is a restarted mapper, not a loss.
+  if (last > 0 && sequence > last + 1) counters_.lost += sequence - last - 1;
+  last = sequence;
 }
 
 void MapFusion::reset() { map_.reset(); }

@@ -161,6 +161,45 @@ TEST_F(PipelineTest, TheMapRefusesUpdatesOfAnotherFrameAndChoosesTheFirstWhenAsk
   EXPECT_FALSE(first_frame.fuse(*update, &why));  // "map" now differs from the map's frame
 }
 
+// The mapper numbers its updates; the map counts what never arrived, per
+// publisher, and takes a restarted mapper's new count as no loss.
+TEST_F(PipelineTest, UpdatesThatNeverArriveAreCounted) {
+  FrameMapping mapping{DisparityMapperParameters()};
+  std::vector<OccupancyUpdatePtr> updates;
+  FrameResult result;
+  for (double t : {10.0, 10.1, 10.2, 10.3, 10.4}) {
+    updates.push_back(mapping.map(frame(t), nullptr, tf_, ros::Time(t), &result));
+    ASSERT_TRUE(updates.back()) << result.why;
+    EXPECT_EQ(updates.back()->sequence, updates.size());
+  }
+  MapFusion fusion{OctomapAccumulatorParameters()};
+  std::string why;
+  ASSERT_TRUE(fusion.fuse(*updates[0], &why, "/mapper_a"));
+  ASSERT_TRUE(fusion.fuse(*updates[3], &why, "/mapper_a"));  // 2 and 3 lost
+  EXPECT_EQ(fusion.counters().lost, 2u);
+  ASSERT_TRUE(fusion.fuse(*updates[1], &why, "/mapper_b"));  // another publisher: its own count
+  ASSERT_TRUE(fusion.fuse(*updates[2], &why, "/mapper_b"));
+  EXPECT_EQ(fusion.counters().lost, 2u);
+  // Two mappers in one manager: one publisher name, two sources, two counts.
+  OccupancyUpdate forward = *updates[1], down = *updates[0];
+  forward.source = "/forward_mapper";
+  down.source = "/down_mapper";
+  ASSERT_TRUE(fusion.fuse(forward, &why, "/manager"));
+  ASSERT_TRUE(fusion.fuse(down, &why, "/manager"));
+  forward.sequence = 3;
+  down.sequence = 2;
+  ASSERT_TRUE(fusion.fuse(forward, &why, "/manager"));
+  ASSERT_TRUE(fusion.fuse(down, &why, "/manager"));
+  EXPECT_EQ(fusion.counters().lost, 2u);
+  ASSERT_TRUE(fusion.fuse(*updates[0], &why, "/mapper_a"));  // restarted: counts from 1 again
+  ASSERT_TRUE(fusion.fuse(*updates[1], &why, "/mapper_a"));
+  EXPECT_EQ(fusion.counters().lost, 2u);
+  OccupancyUpdate uncounted = *updates[4];
+  uncounted.sequence = 0;  // another node's update without a count
+  ASSERT_TRUE(fusion.fuse(uncounted, &why, "/other"));
+  EXPECT_EQ(fusion.counters().lost, 2u);
+}
+
 // Pruning follows the updates' stamps, so that a replay prunes where the flight did.
 TEST_F(PipelineTest, TheMapIsPrunedOnTheUpdatesClock) {
   OctomapAccumulatorParameters params;

@@ -318,6 +318,23 @@ TEST_F(HostileTest, HostileUpdatesLeaveTheMapAndTheManagerAndAFullDiskKeepsTheFi
 
 const char* kMapper = "disparity_mapper: mapper";
 
+// An update queue that overflowed, or a link that drops updates, shows as a
+// gap in a mapper's sequence numbers: counted in the diagnostics, not silent.
+TEST_F(HostileTest, UpdatesThatNeverArriveAreCountedAsLost) {
+  ASSERT_TRUE(waitFor([&] { return diag_[kAccumulator].count("updates lost") > 0; }, 10.0)) << "no diagnostics";
+  const long before = std::stol(diag(kAccumulator, "updates lost"));
+  for (uint64_t sequence : {1u, 2u, 6u}) {  // 3, 4 and 5 never arrive
+    OccupancyUpdate msg = goodUpdate(Eigen::Vector3i(0, 0, 8));
+    msg.source = "/test_mapper";
+    msg.sequence = sequence;
+    update_pub_.publish(msg);
+    ros::WallDuration(0.1).sleep();
+  }
+  const std::string expected = std::to_string(before + 3);
+  EXPECT_TRUE(waitFor([&] { return diag_[kAccumulator]["updates lost"] == expected; }, 20.0))
+      << "updates lost: " << diag(kAccumulator, "updates lost");
+}
+
 TEST_F(HostileTest, BadStampsAndTfNeitherStopNorMisplaceTheMapping) {
   // tf at 100 Hz on another frame all along.
   std::atomic<bool> spamming{true};

@@ -15,6 +15,7 @@
 #include <tf2/buffer_core.h>
 
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <string>
 
@@ -109,6 +110,9 @@ struct FusionCounters {
   uint64_t received = 0;
   uint64_t refused = 0;
   uint64_t leaves_pruned = 0;
+  /// Updates that never arrived: gaps in their publishers' sequence numbers
+  /// (a queue that overflowed while the accumulator was busy, a lossy link).
+  uint64_t lost = 0;
 };
 
 /// Update -> checks -> fuse (MapAccumulator), reading the message in place.
@@ -120,7 +124,9 @@ class MapFusion {
   /// Fuses @p msg if it is in the map's frame and MapAccumulator::admits()
   /// it; otherwise false, the map unchanged, and why. Every prune_period_s of
   /// update stamps, drops what lies beyond max_extent_m (MapAccumulator::prune).
-  bool fuse(const OccupancyUpdate& msg, std::string* why);
+  /// Counts the updates of @p publisher's msg.source lost before this one
+  /// (the gaps in their sequence numbers).
+  bool fuse(const OccupancyUpdate& msg, std::string* why, const std::string& publisher = "");
 
   const MapAccumulator& map() const { return map_; }
   /// Empties the map (the frame stays).
@@ -138,6 +144,7 @@ class MapFusion {
 
  private:
   bool refuse(const std::string& text, std::string* why);
+  void countLost(const OccupancyUpdate& msg, const std::string& publisher);
 
   OctomapAccumulatorParameters params_;
   MapAccumulator map_;
@@ -145,6 +152,7 @@ class MapFusion {
   ros::Time last_stamp_;
   ros::Time last_prune_;  ///< stamp of the update at the last prune
   FusionCounters counters_;
+  std::map<std::string, uint64_t> last_sequence_;  ///< per publisher and source
 };
 
 }  // namespace stereo_occupancy

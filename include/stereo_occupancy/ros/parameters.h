@@ -79,6 +79,7 @@ struct OctomapAccumulatorParameters {
   /// The height band of projected_map (octomap_server's occupancy_min_z / occupancy_max_z) [m].
   double projection_min_z_m = -10000.0;
   double projection_max_z_m = 10000.0;
+  int update_queue_size = 100;  ///< updates waiting for the fusion; more are lost (and counted)
 
   /// The parameters (stereo_occupancy/parameter_table.h): f(spec, member) for each, the map's included.
   template <typename Self, typename F>
@@ -100,6 +101,8 @@ struct OctomapAccumulatorParameters {
       p.projection_min_z_m);
     f(numberParameter("projection_max_z_m", "m", -10000.0, 10000.0, "highest height projected_map sees"),
       p.projection_max_z_m);
+    f(numberParameter("update_queue_size", "updates", 1.0, 10000.0, "updates waiting for the fusion"),
+      p.update_queue_size);
   }
 
   /// The ranges of forEachParameter(), a plain map_name, a world frame for a
