@@ -165,6 +165,54 @@ std::vector<std::string> scenarioNames() {
   return {"posts", "houses", "forest", "wires", "posts_far", "forest_far"};
 }
 
+/// Half a mission's path: 4 m/s for 30 min, weaving 30 m sideways over
+/// 800 m, 4-6 m up; scenery generated along it every 50 m, each stretch one of
+/// a gate of posts (with a wire), houses, trees or power lines, never on the path.
+FlightScenario missionScenario() {
+  FlightScenario s;
+  s.name = "mission";
+  s.scene.ground_height_m = 0.0;
+  constexpr double kSpeedMps = 4.0, kMinutes = 30.0, kWeaveM = 30.0, kWeaveLengthM = 800.0, kStretchM = 50.0;
+  const double length_m = kSpeedMps * kMinutes * 60.0;
+  auto pathY = [&](double x) { return kWeaveM * std::sin(2.0 * M_PI * x / kWeaveLengthM); };
+  std::mt19937 rng(2026);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  for (double x0 = 20.0; x0 + kStretchM < length_m; x0 += kStretchM) {
+    const int kind = static_cast<int>(unit(rng) * 4.0);
+    const double x = x0 + 10.0 + 30.0 * unit(rng), y = pathY(x);
+    if (kind == 0) {  // a gate of two 0.4 m posts, 8 m tall, a 2 cm wire across at 7.5 m
+      for (double side : {-3.5, 3.5}) s.scene.addBox({x - 0.2, y + side - 0.2, 0.0}, {x + 0.2, y + side + 0.2, 8.0});
+      s.scene.addBox({x - 0.01, y - 3.5, 7.49}, {x + 0.01, y + 3.5, 7.51});
+    } else if (kind == 1) {  // houses on both sides, one white (texture-less) now and then
+      for (double side : {-1.0, 1.0}) {
+        const double near = 9.0 + 4.0 * unit(rng), w = 6.0 + 4.0 * unit(rng), h = 5.0 + 4.0 * unit(rng);
+        const double y_near = y + side * near, y_far = y + side * (near + w);
+        s.scene.addBox({x, std::min(y_near, y_far), 0.0}, {x + w, std::max(y_near, y_far), h}, unit(rng) < 0.15);
+      }
+    } else if (kind == 2) {  // thin trunks, none within 3 m of the path
+      for (int k = 0; k < 12; ++k) {
+        const double tx = x0 + kStretchM * unit(rng), ty = pathY(tx) + (unit(rng) < 0.5 ? -1.0 : 1.0) * (3.0 + 20.0 * unit(rng));
+        const double w = 0.1 + 0.2 * unit(rng), h = 6.0 + 8.0 * unit(rng);
+        s.scene.addBox({tx - 0.5 * w, ty - 0.5 * w, 0.0}, {tx + 0.5 * w, ty + 0.5 * w, h});
+      }
+    } else {  // a power line across the path: masts 20 m to each side, two 2 cm wires above the flight
+      for (double side : {-20.0, 20.0}) s.scene.addBox({x - 0.15, y + side - 0.15, 0.0}, {x + 0.15, y + side + 0.15, 10.0});
+      for (double z : {8.0, 9.0}) s.scene.addBox({x - 0.01, y - 20.0, z - 0.01}, {x + 0.01, y + 20.0, z + 0.01});
+    }
+  }
+  s.camera = StereoCameraConfig();
+  s.effects.sky_unmatched_above_row = 120;
+  s.T_B_C = forwardCamera(0.15);
+  s.frame_rate_hz = 10.0;
+  const int n = static_cast<int>(kMinutes * 60.0 * s.frame_rate_hz);
+  for (int i = 0; i < n; ++i) {
+    const double t = i / s.frame_rate_hz, x = kSpeedMps * t;
+    const double dy_dx = kWeaveM * 2.0 * M_PI / kWeaveLengthM * std::cos(2.0 * M_PI * x / kWeaveLengthM);
+    s.T_W_B.push_back(bodyPose({x, pathY(x), 5.0 + 1.0 * std::sin(0.05 * t)}, std::atan(dy_dx)));
+  }
+  return s;
+}
+
 FlightScenario makeScenario(const std::string& name) {
   if (name == "posts") return postsScenario();
   if (name == "houses") return housesScenario();
@@ -172,13 +220,43 @@ FlightScenario makeScenario(const std::string& name) {
   if (name == "wires") return wiresScenario();
   if (name == "posts_far") return farView(postsScenario(), name, 14.8);
   if (name == "forest_far") return farView(forestScenario(), name, 8.0);
-  throw std::invalid_argument("unknown scenario '" + name + "' (posts, houses, forest, wires, posts_far, forest_far)");
+  if (name == "mission") return missionScenario();
+  throw std::invalid_argument("unknown scenario '" + name +
+                              "' (posts, houses, forest, wires, posts_far, forest_far, mission)");
 }
 
 namespace {
-cv::Mat render(const FlightScenario& s, size_t frame, cv::Mat* true_depth, cv::Mat* hit_index) {
+/// Scenes larger than this are cut to the boxes near the camera first.
+constexpr size_t kCullAboveBoxes = 500;
+/// ... those within this of the camera [m]: far beyond the sensor's range.
+constexpr double kCullDistanceM = 100.0;
+
+/// @p scene's boxes within kCullDistanceM of @p W_camera (a mission's
+/// thousands of boxes would cost each ray a test of every one).
+/// @p original[i]: the index in @p scene of the near scene's box i.
+SyntheticScene nearScene(const SyntheticScene& scene, const Eigen::Vector3d& W_camera, std::vector<int>* original) {
+  SyntheticScene near;
+  near.ground_height_m = scene.ground_height_m;
+  for (size_t k = 0; k < scene.boxes.size(); ++k)
+    if (scene.boxes[k].exteriorDistance(W_camera) < kCullDistanceM) {
+      near.boxes.push_back(scene.boxes[k]);
+      near.textureless.push_back(scene.textureless[k]);
+      original->push_back(static_cast<int>(k));
+    }
+  return near;
+}
+
+cv::Mat render(const FlightScenario& full, size_t frame, cv::Mat* true_depth, cv::Mat* hit_index) {
+  const Eigen::Isometry3d T_W_C = full.cameraPose(frame);
+  FlightScenario culled;
+  std::vector<int> original;  // culled box index -> full.scene's
+  const bool cull = full.scene.boxes.size() > kCullAboveBoxes;
+  if (cull) {
+    culled.scene = nearScene(full.scene, T_W_C.translation(), &original);
+    culled.camera = full.camera;
+  }
+  const FlightScenario& s = cull ? culled : full;
   const StereoCameraModel camera(s.camera);
-  const Eigen::Isometry3d T_W_C = s.cameraPose(frame);
   const Eigen::Matrix3d R_W_C = T_W_C.linear();
   cv::Mat disparity(s.camera.height_px, s.camera.width_px, CV_32FC1);
   if (true_depth) true_depth->create(disparity.size(), CV_32FC1);
@@ -192,7 +270,7 @@ cv::Mat render(const FlightScenario& s, size_t frame, cv::Mat* true_depth, cv::M
       const double z = range / norm;
       disparity.at<float>(y, x) = std::isfinite(z) ? static_cast<float>(camera.disparityFromDepth(z)) : 0.0f;
       if (true_depth) true_depth->at<float>(y, x) = static_cast<float>(z);
-      if (hit_index) hit_index->at<int>(y, x) = hit;
+      if (hit_index) hit_index->at<int>(y, x) = (cull && hit >= 0) ? original[static_cast<size_t>(hit)] : hit;
     }
   }
   return disparity;

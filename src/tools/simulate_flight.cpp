@@ -29,9 +29,11 @@ namespace tools = stereo_occupancy::tools;
 namespace {
 
 int usage(int code) {
-  std::cerr << "usage: simulate_flight --scenario posts|houses|forest|wires --output FILE.bag [--seed N] [--frames N]"
-               " [--true-depth]\n"
-               "  --true-depth  also write each frame's exact depth (32FC1, m; inf: sky) on /ground_truth/depth\n";
+  std::cerr << "usage: simulate_flight --scenario posts|houses|forest|wires|posts_far|forest_far|mission\n"
+               "                       --output FILE.bag [--seed N] [--frames N | --duration-s S] [--true-depth]\n"
+               "  mission        a 30-minute, 7 km flight with scenery generated along its path\n"
+               "  --duration-s   the first S seconds of the flight (as --frames S x its frame rate)\n"
+               "  --true-depth   also write each frame's exact depth (32FC1, m; inf: sky) on /ground_truth/depth\n";
   return code;
 }
 
@@ -39,6 +41,7 @@ int run(int argc, char** argv) {
   std::string scenario_name, output;
   uint32_t seed = 1;
   long frames = -1;
+  double duration_s = -1.0;
   bool true_depth = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -46,12 +49,17 @@ int run(int argc, char** argv) {
     else if (a == "--output") output = tools::nextValue(argc, argv, &i);
     else if (a == "--seed") seed = static_cast<uint32_t>(tools::parseWhole(a, tools::nextValue(argc, argv, &i), 0, 4294967295L));
     else if (a == "--frames") frames = tools::parseWhole(a, tools::nextValue(argc, argv, &i), 1, 1000000);
-    else if (a == "--true-depth") true_depth = true;
+    else if (a == "--duration-s") {
+      duration_s = tools::parseNumber(a, tools::nextValue(argc, argv, &i));
+      if (!(duration_s > 0.0)) throw tools::UsageError("--duration-s expects a positive number of seconds");
+    } else if (a == "--true-depth") true_depth = true;
     else if (a == "--help") return usage(0);
     else throw tools::UsageError("unknown option '" + a + "'");
   }
   if (scenario_name.empty() || output.empty()) throw tools::UsageError("--scenario and --output are required");
+  if (frames > 0 && duration_s > 0.0) throw tools::UsageError("--frames and --duration-s exclude each other");
   so::FlightScenario s = tools::scenarioNamed(scenario_name);
+  if (duration_s > 0.0) frames = std::max(1L, std::lround(duration_s * s.frame_rate_hz));
   const size_t n = frames > 0 ? std::min<size_t>(frames, s.T_W_B.size()) : s.T_W_B.size();
   rosbag::Bag bag(output, rosbag::bagmode::Write);
   bag.setCompression(rosbag::compression::LZ4);
