@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <unordered_set>
 #include <vector>
 
 #include "stereo_occupancy/grid_update.h"
@@ -100,6 +101,17 @@ class MapAccumulator {
   /// Number of updates integrated since the last reset.
   size_t updates() const { return updates_; }
 
+  /// Edge of the blocks whose changes the map tracks, for outputs that cost
+  /// what changed [cells].
+  static constexpr int kBlockCells = 16;
+  /// A block's index: global cell index / kBlockCells per axis.
+  using BlockIndex = Eigen::Vector3i;
+  /// The blocks changed since takeChangedBlocks() last returned them; all of
+  /// the map's blocks after a reset, load, clearBox or prune (@p all then true).
+  std::vector<BlockIndex> takeChangedBlocks(bool* all);
+  /// The next takeChangedBlocks() returns all blocks (a new subscriber wants the whole map).
+  void markAllChanged() { all_changed_ = true; }
+
   /// Writes <directory>/<base_name>.bt and .ot, each through a temporary file
   /// that is synced to disk and then renamed into place (writeOcTree), so a
   /// crash or a full disk never leaves a half-written map.
@@ -116,6 +128,8 @@ class MapAccumulator {
   size_t next_origin_ = 0;                          ///< where the next one goes in the ring
   size_t updates_ = 0;
   mutable bool inner_stale_ = false;  ///< inner nodes lag the leaves until tree() is called
+  std::unordered_set<uint64_t> changed_blocks_;  ///< packed BlockIndex of the blocks changed
+  bool all_changed_ = true;                      ///< the whole map changed (reset, load, clearBox, prune)
 };
 
 }  // namespace stereo_occupancy

@@ -44,7 +44,60 @@ void MapAccumulator::applyThresholds() {
   tree_->setOccupancyThres(config_.occupancy_threshold_prob);
 }
 
+namespace {
+
+/// A block index packed into 64 bits (21 bits per axis, offset to be >= 0).
+constexpr int kPackBits = 21;
+constexpr int64_t kPackOffset = int64_t{1} << (kPackBits - 1);
+uint64_t packBlock(const Eigen::Vector3i& b) {
+  const uint64_t mask = (uint64_t{1} << kPackBits) - 1;
+  return ((static_cast<uint64_t>(b.x() + kPackOffset) & mask) << (2 * kPackBits)) |
+         ((static_cast<uint64_t>(b.y() + kPackOffset) & mask) << kPackBits) |
+         (static_cast<uint64_t>(b.z() + kPackOffset) & mask);
+}
+Eigen::Vector3i unpackBlock(uint64_t p) {
+  const uint64_t mask = (uint64_t{1} << kPackBits) - 1;
+  return Eigen::Vector3i(static_cast<int>(static_cast<int64_t>((p >> (2 * kPackBits)) & mask) - kPackOffset),
+                         static_cast<int>(static_cast<int64_t>((p >> kPackBits) & mask) - kPackOffset),
+                         static_cast<int>(static_cast<int64_t>(p & mask) - kPackOffset));
+}
+/// floor(g / kBlockCells) for negative g too.
+int blockOf(int g) {
+  return g >= 0 ? g / MapAccumulator::kBlockCells : -((-g + MapAccumulator::kBlockCells - 1) / MapAccumulator::kBlockCells);
+}
+
+}  // namespace
+
+std::vector<MapAccumulator::BlockIndex> MapAccumulator::takeChangedBlocks(bool* all) {
+  *all = all_changed_;
+  std::vector<BlockIndex> blocks;
+  if (all_changed_) {
+    // Every block that holds a leaf (a coarse leaf: each block it spans).
+    std::unordered_set<uint64_t> seen;
+    const int offset = static_cast<int>(tree_->coordToKey(0.0));
+    const unsigned depth = tree_->getTreeDepth();
+    for (auto it = tree().begin_leafs(), end = tree().end_leafs(); it != end; ++it) {
+      const octomap::OcTreeKey first = it.getIndexKey();
+      const int side = 1 << (depth - it.getDepth());
+      const int step = std::min(side, kBlockCells);
+      for (int dz = 0; dz < side; dz += step)
+        for (int dy = 0; dy < side; dy += step)
+          for (int dx = 0; dx < side; dx += step)
+            seen.insert(packBlock(Eigen::Vector3i(blockOf(first[0] + dx - offset), blockOf(first[1] + dy - offset),
+                                                  blockOf(first[2] + dz - offset))));
+    }
+    for (uint64_t p : seen) blocks.push_back(unpackBlock(p));
+  } else {
+    for (uint64_t p : changed_blocks_) blocks.push_back(unpackBlock(p));
+  }
+  changed_blocks_.clear();
+  all_changed_ = false;
+  return blocks;
+}
+
 void MapAccumulator::reset() {
+  all_changed_ = true;
+  changed_blocks_.clear();
   inner_stale_ = false;
   tree_ = std::make_unique<AccumulatingOcTree>(config_.resolution_m);
   applyThresholds();
@@ -116,6 +169,7 @@ size_t MapAccumulator::clearBox(const Eigen::Vector3d& W_min, const Eigen::Vecto
   const float cleared = tree_->getClampingThresMinLog();
   for (const octomap::OcTreeKey& k : cells) tree_->setNodeValue(k, cleared, /*lazy_eval=*/true);
   inner_stale_ = inner_stale_ || !cells.empty();
+  all_changed_ = all_changed_ || !cells.empty();
   return cells.size();
 }
 
@@ -165,6 +219,7 @@ bool MapAccumulator::integrate(const GridUpdateView& update, std::string* why) {
                                    static_cast<octomap::key_type>(g.y() + offset),
                                    static_cast<octomap::key_type>(g.z() + offset));
     updater.addSiblings(first, values);  // = updateNode(key, log_odds, lazy) per cell
+    if (!all_changed_) changed_blocks_.insert(packBlock(Eigen::Vector3i(blockOf(g.x()), blockOf(g.y()), blockOf(g.z()))));
   });
   inner_stale_ = true;
   if (W_recent_origins_.size() < kPruneOrigins) {
@@ -197,6 +252,7 @@ size_t MapAccumulator::prune() {
   kept->updateInnerOccupancy();
   tree_ = std::move(kept);
   applyThresholds();
+  all_changed_ = true;  // the dropped blocks must go from the outputs too
   return outside;
 }
 

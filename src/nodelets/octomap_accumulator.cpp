@@ -100,7 +100,15 @@ void OctomapAccumulator::onInit() {
   // octomap_server's names and types, latched as there.
   octomap_pub_ = nh.advertise<Octomap>("octomap_binary", 1, /*latch=*/true);
   octomap_full_pub_ = nh.advertise<Octomap>("octomap_full", 1, /*latch=*/true);
-  markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>("occupied_cells_vis_array", 1, /*latch=*/true);
+  // Occupied cells a block at a time, only the blocks changed since the last
+  // publish; a new subscriber gets the whole map first.
+  markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>(
+      "occupied_cells_vis_array", 10, [this](const ros::SingleSubscriberPublisher&) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (!fusion_) return;
+        fusion_->markAllChanged();
+        changed_since_publish_ = true;
+      });
   free_markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>("free_cells_vis_array", 1, /*latch=*/true);
   cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("octomap_point_cloud_centers", 1, /*latch=*/true);
   projected_pub_ = nh.advertise<nav_msgs::OccupancyGrid>("projected_map", 1, /*latch=*/true);
@@ -218,10 +226,13 @@ void OctomapAccumulator::publish(const ros::TimerEvent&) {
   // Each output is built only while someone listens: a marker array of a
   // large map costs more than many updates.
   const auto wanted = [](const ros::Publisher& pub) { return pub.getNumSubscribers() > 0; };
-  if (!wanted(octomap_pub_) && !wanted(octomap_full_pub_) && !wanted(markers_pub_) && !wanted(free_markers_pub_) &&
-      !wanted(cloud_pub_) && !wanted(projected_pub_))
-    return;
+  const bool anyone = wanted(octomap_pub_) || wanted(octomap_full_pub_) || wanted(markers_pub_) ||
+                      wanted(free_markers_pub_) || wanted(cloud_pub_) || wanted(projected_pub_);
   std::lock_guard<std::mutex> lock(mutex_);
+  if (!anyone) {
+    fusion_->markAllChanged();  // no changes kept for nobody: the next subscriber gets the whole map
+    return;
+  }
   if (!changed_since_publish_ || fusion_->frameId().empty()) return;
   changed_since_publish_ = false;
   const std_msgs::Header header = mapHeader();
@@ -233,12 +244,21 @@ void OctomapAccumulator::publish(const ros::TimerEvent&) {
     toMsg(tree, binary, header, msg.get());
     pub.publish(msg);
   }
-  for (const bool occupied : {true, false}) {
-    const ros::Publisher& pub = occupied ? markers_pub_ : free_markers_pub_;
-    if (!wanted(pub)) continue;
+  if (wanted(markers_pub_)) {
+    bool all = false;
+    const std::vector<MapAccumulator::BlockIndex> blocks = fusion_->takeChangedBlocks(&all);
+    if (all || !blocks.empty()) {
+      auto msg = boost::make_shared<visualization_msgs::MarkerArray>();
+      blockMarkers(tree, blocks, all, header, msg.get());
+      markers_pub_.publish(msg);
+    }
+  } else {
+    fusion_->markAllChanged();  // nobody to send changes to: the next subscriber gets the whole map
+  }
+  if (wanted(free_markers_pub_)) {
     auto msg = boost::make_shared<visualization_msgs::MarkerArray>();
-    cellMarkers(tree, occupied, header, msg.get());
-    pub.publish(msg);
+    cellMarkers(tree, /*occupied=*/false, header, msg.get());
+    free_markers_pub_.publish(msg);
   }
   if (wanted(cloud_pub_)) {
     auto msg = boost::make_shared<sensor_msgs::PointCloud2>();

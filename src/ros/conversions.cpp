@@ -10,6 +10,8 @@
 #include <sstream>
 #include <utility>
 
+#include "stereo_occupancy/map_accumulator.h"
+
 namespace stereo_occupancy {
 
 bool checkImageLayout(const sensor_msgs::Image& image, uint64_t max_pixels, std::string* why) {
@@ -244,6 +246,60 @@ void cellMarkers(const octomap::OcTree& tree, bool occupied, const std_msgs::Hea
       m.color.a = kFreeMarkerAlpha;
     }
     m.action = m.points.empty() ? visualization_msgs::Marker::DELETE : visualization_msgs::Marker::ADD;
+  }
+}
+
+void blockMarkers(const octomap::OcTree& tree, const std::vector<Eigen::Vector3i>& blocks, bool all,
+                  const std_msgs::Header& header, visualization_msgs::MarkerArray* markers) {
+  constexpr int kBlock = MapAccumulator::kBlockCells;
+  constexpr int kBlocksPerAxis = 65536 / kBlock;  // the key range in blocks
+  double x0, y0, z_min, x1, y1, z_max;
+  tree.getMetricMin(x0, y0, z_min);
+  tree.getMetricMax(x1, y1, z_max);
+  const int offset = static_cast<int>(tree.coordToKey(0.0));  // key of global index 0
+  const unsigned depth = tree.getTreeDepth();
+  const double c = tree.getResolution();
+  markers->markers.clear();
+  if (all) {
+    visualization_msgs::Marker clear;
+    clear.header = header;
+    clear.action = visualization_msgs::Marker::DELETEALL;
+    markers->markers.push_back(clear);
+  }
+  for (const Eigen::Vector3i& b : blocks) {
+    visualization_msgs::Marker m;
+    m.header = header;
+    m.ns = "occupied_cells_z" + std::to_string(b.z());
+    m.id = (b.x() + kBlocksPerAxis / 2) * kBlocksPerAxis + (b.y() + kBlocksPerAxis / 2);
+    m.type = visualization_msgs::Marker::CUBE_LIST;
+    m.scale.x = m.scale.y = m.scale.z = c;
+    m.pose.orientation.w = 1.0;
+    m.color.a = 1.0f;
+    // The block's keys; a coarse leaf gives the cells of it that the block holds.
+    const Eigen::Vector3i lo = b * kBlock, hi = lo + Eigen::Vector3i::Constant(kBlock - 1);
+    const octomap::OcTreeKey key_lo(static_cast<octomap::key_type>(lo.x() + offset),
+                                    static_cast<octomap::key_type>(lo.y() + offset),
+                                    static_cast<octomap::key_type>(lo.z() + offset));
+    const octomap::OcTreeKey key_hi(static_cast<octomap::key_type>(hi.x() + offset),
+                                    static_cast<octomap::key_type>(hi.y() + offset),
+                                    static_cast<octomap::key_type>(hi.z() + offset));
+    for (auto it = tree.begin_leafs_bbx(key_lo, key_hi), end = tree.end_leafs_bbx(); it != end; ++it) {
+      if (!tree.isNodeOccupied(*it)) continue;
+      const octomap::OcTreeKey first = it.getIndexKey();
+      const int side = 1 << (depth - it.getDepth());
+      for (int z = std::max<int>(first[2], key_lo[2]); z <= std::min<int>(first[2] + side - 1, key_hi[2]); ++z)
+        for (int y = std::max<int>(first[1], key_lo[1]); y <= std::min<int>(first[1] + side - 1, key_hi[1]); ++y)
+          for (int x = std::max<int>(first[0], key_lo[0]); x <= std::min<int>(first[0] + side - 1, key_hi[0]); ++x) {
+            geometry_msgs::Point p;
+            p.x = (x - offset + 0.5) * c;
+            p.y = (y - offset + 0.5) * c;
+            p.z = (z - offset + 0.5) * c;
+            m.points.push_back(p);
+            m.colors.push_back(heightColour(p.z, z_min, z_max));
+          }
+    }
+    m.action = m.points.empty() ? visualization_msgs::Marker::DELETE : visualization_msgs::Marker::ADD;
+    markers->markers.push_back(std::move(m));
   }
 }
 

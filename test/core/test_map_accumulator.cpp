@@ -6,6 +6,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -334,4 +335,30 @@ TEST(MapAccumulator, ClearBoxLeavesNothingOccupiedInside) {
   EXPECT_EQ(occupied_inside, 0u);
   EXPECT_EQ(occupied_outside, 16u * 16u * 16u - 64u);
   EXPECT_EQ(map.clearBox(Eigen::Vector3d(0.5, 0.5, 0.5), Eigen::Vector3d(1.49, 1.49, 1.49)), 0u);  // nothing left
+}
+
+// The blocks an update changed, for outputs that cost what changed: all of
+// the map's blocks first and after a reset; then only those updates touched.
+TEST(MapAccumulator, TracksTheBlocksUpdatesChange) {
+  MapAccumulator map{MapAccumulatorConfig()};
+  bool all = false;
+  EXPECT_TRUE(map.takeChangedBlocks(&all).empty());
+  EXPECT_TRUE(all);  // a new map: "everything" (nothing) changed
+  ASSERT_TRUE(map.integrate(singleCell(Eigen::Vector3i(5, 5, 5), 1.0f)));
+  ASSERT_TRUE(map.integrate(singleCell(Eigen::Vector3i(-1, 20, 40), 1.0f)));
+  std::vector<MapAccumulator::BlockIndex> blocks = map.takeChangedBlocks(&all);
+  EXPECT_FALSE(all);
+  ASSERT_EQ(blocks.size(), 2u);
+  std::sort(blocks.begin(), blocks.end(), [](const auto& a, const auto& b) { return a.x() < b.x(); });
+  EXPECT_EQ(blocks[0], Eigen::Vector3i(-1, 1, 2));  // floor(-1 / 16) = -1
+  EXPECT_EQ(blocks[1], Eigen::Vector3i(0, 0, 0));
+  EXPECT_TRUE(map.takeChangedBlocks(&all).empty());  // taken
+  ASSERT_TRUE(map.integrate(singleCell(Eigen::Vector3i(6, 5, 5), 1.0f)));
+  blocks = map.takeChangedBlocks(&all);
+  ASSERT_EQ(blocks.size(), 1u);
+  EXPECT_EQ(blocks[0], Eigen::Vector3i(0, 0, 0));
+  map.markAllChanged();  // a new subscriber: every block that holds a cell
+  blocks = map.takeChangedBlocks(&all);
+  EXPECT_TRUE(all);
+  EXPECT_EQ(blocks.size(), 2u);
 }

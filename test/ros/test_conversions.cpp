@@ -250,3 +250,27 @@ TEST(Conversions, ProjectedMapToOccupancyGrid) {
   EXPECT_DOUBLE_EQ(msg.info.origin.orientation.w, 1.0);
   EXPECT_EQ(msg.data, (std::vector<int8_t>{-1, 0, 100, 0, 0, 100}));
 }
+
+// A block's marker holds the block's occupied cells, a coarse leaf's cells
+// inside the block included; an emptied block is a DELETE; the whole map
+// starts with a DELETEALL.
+TEST(Conversions, BlockMarkers) {
+  octomap::OcTree tree(0.25);
+  tree.updateNode(octomap::point3d(0.125f, 0.125f, 0.125f), true);   // global cell (0, 0, 0): block (0, 0, 0)
+  tree.updateNode(octomap::point3d(4.125f, 0.125f, 0.125f), true);   // cell (16, 0, 0): block (1, 0, 0)
+  tree.updateNode(octomap::point3d(0.375f, 0.125f, 0.125f), false);  // free: not drawn
+  std_msgs::Header header;
+  header.frame_id = "map";
+  visualization_msgs::MarkerArray markers;
+  blockMarkers(tree, {Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(1, 0, 0), Eigen::Vector3i(5, 5, 5)}, true, header,
+               &markers);
+  ASSERT_EQ(markers.markers.size(), 4u);
+  EXPECT_EQ(markers.markers[0].action, visualization_msgs::Marker::DELETEALL);
+  EXPECT_EQ(markers.markers[1].action, visualization_msgs::Marker::ADD);
+  ASSERT_EQ(markers.markers[1].points.size(), 1u);
+  EXPECT_DOUBLE_EQ(markers.markers[1].points[0].x, 0.125);
+  EXPECT_EQ(markers.markers[2].points.size(), 1u);
+  EXPECT_NE(markers.markers[1].id, markers.markers[2].id);
+  EXPECT_EQ(markers.markers[3].action, visualization_msgs::Marker::DELETE);  // a block without occupied cells
+  EXPECT_EQ(markers.markers[1].ns, "occupied_cells_z0");
+}

@@ -15,11 +15,13 @@
 
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <mutex>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "stereo_occupancy/BoundingBoxQuery.h"
 #include "stereo_occupancy/GetOctomap.h"
@@ -186,6 +188,37 @@ TEST_F(OctomapServerTest, OutputsAndServicesAsOctomapServer) {
   BoundingBoxQuery inverted = clear;
   inverted.request.min.x = 20.0;  // min > max: refused
   EXPECT_FALSE(ros::service::call("/octomap_accumulator/clear_bbx", inverted));
+}
+
+// occupied_cells_vis_array costs what changed: a new subscriber gets the
+// whole map (a DELETEALL, then every block), later messages only the blocks
+// that updates changed.
+TEST_F(OctomapServerTest, MarkersCarryOnlyTheChangedBlocks) {
+  std::vector<visualization_msgs::MarkerArrayConstPtr> received;
+  ros::Subscriber sub = nh_.subscribe<visualization_msgs::MarkerArray>(
+      "/occupied_cells_vis_array", 10, [&](const visualization_msgs::MarkerArrayConstPtr& msg) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        received.push_back(msg);
+      });
+  mapTheWall();
+  ASSERT_TRUE(waitFor(mutex_, [&] { return !received.empty(); }, 10.0));
+  size_t whole = 0;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ASSERT_EQ(received.front()->markers.front().action, visualization_msgs::Marker::DELETEALL);
+    for (const auto& msg : received) whole = std::max(whole, msg->markers.size());
+    received.clear();
+  }
+  // One more frame of the same wall changes some blocks: a message of those only.
+  mapTheWall();
+  ASSERT_TRUE(waitFor(mutex_, [&] { return !received.empty(); }, 10.0));
+  std::lock_guard<std::mutex> lock(mutex_);
+  for (const auto& msg : received) {
+    ASSERT_FALSE(msg->markers.empty());
+    EXPECT_NE(msg->markers.front().action, visualization_msgs::Marker::DELETEALL);
+    EXPECT_LE(msg->markers.size(), whole);
+    for (const auto& m : msg->markers) EXPECT_EQ(m.ns.rfind("occupied_cells_z", 0), 0u) << m.ns;
+  }
 }
 
 // map_file: an accumulator loaded into the running manager with a saved map

@@ -12,6 +12,7 @@
 
 #include <Eigen/Geometry>
 #include <string>
+#include <vector>
 
 #include "stereo_occupancy/OccupancyUpdate.h"
 #include "stereo_occupancy/Octomap.h"
@@ -71,6 +72,15 @@ void toMsg(const octomap::OcTree& tree, bool binary, const std_msgs::Header& hea
 /// free ones a translucent green ("free_cells"), as octomap_server shows them.
 void cellMarkers(const octomap::OcTree& tree, bool occupied, const std_msgs::Header& header,
                  visualization_msgs::MarkerArray* markers);
+
+/// The occupied cells of @p blocks (MapAccumulator's change-tracking blocks)
+/// as one cube list each, coloured by height over the map's height: a block
+/// is marker (namespace "occupied_cells_z<bz>", id from bx, by) that rviz
+/// replaces when the block changes; a block without occupied cells is a
+/// DELETE. With @p all (the whole map) a DELETEALL comes first, so that
+/// blocks that went away go from rviz too.
+void blockMarkers(const octomap::OcTree& tree, const std::vector<Eigen::Vector3i>& blocks, bool all,
+                  const std_msgs::Header& header, visualization_msgs::MarkerArray* markers);
 
 /// The projected map as a nav_msgs/OccupancyGrid in the header's frame (z = 0).
 void toMsg(const ProjectedMap& map, const std_msgs::Header& header, nav_msgs::OccupancyGrid* msg);

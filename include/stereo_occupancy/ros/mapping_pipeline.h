@@ -134,6 +134,9 @@ class MapFusion {
   /// Starts over from the map in @p path (MapAccumulator::load).
   /// @throws std::runtime_error; the map is then unchanged.
   void load(const std::string& path) { map_.load(path); }
+  /// MapAccumulator::takeChangedBlocks() and markAllChanged(): what the outputs must send again.
+  std::vector<MapAccumulator::BlockIndex> takeChangedBlocks(bool* all) { return map_.takeChangedBlocks(all); }
+  void markAllChanged() { map_.markAllChanged(); }
   /// Leaves no occupied cell in the box (MapAccumulator::clearBox); returns how many were cleared.
   size_t clearBox(const Eigen::Vector3d& W_min, const Eigen::Vector3d& W_max) { return map_.clearBox(W_min, W_max); }
   /// The map's frame: world_frame, or (world_frame "") the first fused update's; "" before it.
