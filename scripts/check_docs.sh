@@ -55,15 +55,8 @@ done
 
 for p in "${problems[@]}"; do echo "check_docs: $p"; done
 echo "check_docs: README.md and docs/*.md: ${#problems[@]} problems"
-if [ -n "${RESULTS:-}" ]; then
-  mkdir -p "$RESULTS"
-  {
-    echo '<?xml version="1.0" encoding="UTF-8"?>'
-    echo "<testsuite name=\"docs\" tests=\"1\" failures=\"$([ ${#problems[@]} = 0 ] && echo 0 || echo 1)\" errors=\"0\">"
-    echo "  <testcase classname=\"docs\" name=\"links_resolve_and_commands_exist\">"
-    [ ${#problems[@]} = 0 ] || echo "    <failure message=\"${#problems[@]} problems: $(printf '%s; ' "${problems[@]}" | sed 's/"/\&quot;/g')\"/>"
-    echo "  </testcase>"
-    echo "</testsuite>"
-  } >"$RESULTS/docs.xml"
-fi
+# shellcheck source=scripts/junit.sh
+source "$repo/scripts/junit.sh"
+[ -z "${RESULTS:-}" ] || junit "$RESULTS" docs links_resolve_and_commands_exist \
+  "$([ ${#problems[@]} = 0 ] || echo "${#problems[@]} problems: $(printf '%s; ' "${problems[@]}")")"
 [ ${#problems[@]} = 0 ]

@@ -32,15 +32,8 @@ if [ -n "$failure" ]; then
 else
   echo "online and offline maps are byte-identical ($(stat -c %s "$out/offline.bt") + $(stat -c %s "$out/offline.ot") bytes)"
 fi
-if [ -n "${RESULTS:-}" ]; then
-  mkdir -p "$RESULTS"
-  {
-    echo '<?xml version="1.0" encoding="UTF-8"?>'
-    echo "<testsuite name=\"online_offline\" tests=\"1\" failures=\"$([ -z "$failure" ] && echo 0 || echo 1)\" errors=\"0\">"
-    echo "  <testcase classname=\"online_offline\" name=\"bag_to_map_equals_replay_launch_${scenario}\">"
-    [ -z "$failure" ] || echo "    <failure message=\"$failure see build/online_offline\"/>"
-    echo "  </testcase>"
-    echo "</testsuite>"
-  } >"$RESULTS/online_offline.xml"
-fi
+# shellcheck source=scripts/junit.sh
+source "$repo/scripts/junit.sh"
+[ -z "${RESULTS:-}" ] || junit "$RESULTS" online_offline "bag_to_map_equals_replay_launch_${scenario}" \
+  "${failure:+$failure see build/online_offline}"
 [ -z "$failure" ]

@@ -53,15 +53,7 @@ coloured="$(convert "$out" -crop 1000x780+380+70 -colorspace HSL -channel G -sep
 [ "$coloured" -gt 2000 ] || failure="$failure; only $coloured coloured pixels: the map is not on screen"
 echo "render_rviz: $out ($coloured coloured pixels)${failure:+; FAILED: $failure}"
 if [ "${DOCS:-0}" = 1 ]; then cp "$out" "$repo/docs/$(basename "$out")"; fi
-if [ -n "${RESULTS:-}" ]; then
-  mkdir -p "$RESULTS"
-  {
-    echo '<?xml version="1.0" encoding="UTF-8"?>'
-    echo "<testsuite name=\"rviz\" tests=\"1\" failures=\"$([ -z "$failure" ] && echo 0 || echo 1)\" errors=\"0\">"
-    echo "  <testcase classname=\"rviz\" name=\"mapping_rviz_shows_the_map\">"
-    [ -z "$failure" ] || echo "    <failure message=\"$failure\"/>"
-    echo "  </testcase>"
-    echo "</testsuite>"
-  } >"$RESULTS/rviz.xml"
-fi
+# shellcheck source=scripts/junit.sh
+source "$repo/scripts/junit.sh"
+[ -z "${RESULTS:-}" ] || junit "$RESULTS" rviz mapping_rviz_shows_the_map "$failure"
 [ -z "$failure" ]

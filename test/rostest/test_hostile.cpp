@@ -336,20 +336,26 @@ TEST_F(HostileTest, UpdatesThatNeverArriveAreCountedAsLost) {
 }
 
 TEST_F(HostileTest, BadStampsAndTfNeitherStopNorMisplaceTheMapping) {
-  // tf at 100 Hz on another frame all along.
-  std::atomic<bool> spamming{true};
-  std::thread spam([&] {
+  // tf at 100 Hz on another frame all along; stopped however the test ends
+  // (a failed ASSERT returns early: a thread left joinable would abort the test).
+  struct Spam {
+    std::atomic<bool> on{true};
+    std::thread thread;
+    void stop() {
+      on = false;
+      if (thread.joinable()) thread.join();
+    }
+    ~Spam() { stop(); }
+  } spam;
+  spam.thread = std::thread([&spam] {
     tf2_ros::TransformBroadcaster broadcaster;
     ros::WallRate rate(100.0);
-    while (spamming) {
+    while (spam.on) {
       broadcaster.sendTransform(toTransformMsg(Eigen::Isometry3d::Identity(), ros::Time::now(), "map", "spam_link"));
       rate.sleep();
     }
   });
-  auto stopSpam = [&] {
-    spamming = false;
-    spam.join();
-  };
+  auto stopSpam = [&] { spam.stop(); };
 
   ros::Time t = ros::Time::now();
   sendFrame(t);
@@ -421,13 +427,3 @@ TEST_F(HostileTest, BadStampsAndTfNeitherStopNorMisplaceTheMapping) {
 }
 
 }  // namespace
-
-int main(int argc, char** argv) {
-  ::testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_hostile");
-  ros::AsyncSpinner spinner(2);
-  spinner.start();
-  const int result = RUN_ALL_TESTS();
-  ros::shutdown();
-  return result;
-}

@@ -257,13 +257,3 @@ TEST_F(OctomapServerTest, AnAccumulatorStartsFromASavedMap) {
   unload.request.name = "/restored";
   EXPECT_TRUE(ros::service::call("/stereo_occupancy_manager/unload_nodelet", unload));
 }
-
-int main(int argc, char** argv) {
-  ::testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_octomap_server");
-  ros::AsyncSpinner spinner(2);
-  spinner.start();
-  const int result = RUN_ALL_TESTS();
-  ros::shutdown();
-  return result;
-}

@@ -162,13 +162,3 @@ TEST(StereoPipeline, StereoImageProcDisparitiesMapTheScene) {
   EXPECT_GT(static_cast<double>(before), 0.5 * static_cast<double>(surface));  // the space before was observed
   EXPECT_LT(static_cast<double>(before_occupied), 0.05 * static_cast<double>(before));
 }
-
-int main(int argc, char** argv) {
-  ::testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_stereo_pipeline");
-  ros::AsyncSpinner spinner(2);
-  spinner.start();
-  const int result = RUN_ALL_TESTS();
-  ros::shutdown();
-  return result;
-}

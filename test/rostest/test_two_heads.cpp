@@ -88,13 +88,3 @@ TEST(TwoHeads, BothCamerasCellsArriveInOneMap) {
   EXPECT_FALSE(map.isNodeOccupied(ahead));
   EXPECT_FALSE(map.isNodeOccupied(below));
 }
-
-int main(int argc, char** argv) {
-  ::testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_two_heads");
-  ros::AsyncSpinner spinner(2);
-  spinner.start();
-  const int result = RUN_ALL_TESTS();
-  ros::shutdown();
-  return result;
-}
