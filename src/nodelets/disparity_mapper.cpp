@@ -359,9 +359,13 @@ void DisparityMapper::process(const char* what, MapImage&& map_image) {
   update->source = getName();  // nodelets in one manager share a node name
   update_pub_.publish(update);  // as Ptr: no copy to nodelets in the same manager
   if (cloud_pub_.getNumSubscribers() > 0) {
-    auto cloud = boost::make_shared<sensor_msgs::PointCloud2>();
-    occupiedCellCloud(mapping_->grid(), update->header, cloud.get());
-    cloud_pub_.publish(cloud);
+    try {  // bad_alloc for a huge grid: nothing may leave a callback, and the update is out already
+      auto cloud = boost::make_shared<sensor_msgs::PointCloud2>();
+      occupiedCellCloud(mapping_->grid(), update->header, cloud.get());
+      cloud_pub_.publish(cloud);
+    } catch (const std::exception& e) {
+      NODELET_WARN_THROTTLE(kWarnThrottleS, "no local_grid_cloud for this image: %s", e.what());
+    }
   }
   last_processing_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   max_processing_ms_ = std::max(max_processing_ms_, last_processing_ms_);

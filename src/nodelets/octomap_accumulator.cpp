@@ -44,6 +44,7 @@ class OctomapAccumulator : public nodelet::Nodelet {
   void onInit() override;
   void updateCallback(const ros::MessageEvent<const OccupancyUpdate>& event);
   void publish(const ros::TimerEvent&);
+  void publishOutputs();  ///< publish()'s work; may throw
   bool saveMap(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response);
   bool clearBox(BoundingBoxQuery::Request& request, BoundingBoxQuery::Response&);
   /// The map on request: binary (octomap_binary) or with log-odds (octomap_full).
@@ -223,6 +224,14 @@ std_msgs::Header OctomapAccumulator::mapHeader() const {
 }
 
 void OctomapAccumulator::publish(const ros::TimerEvent&) {
+  try {
+    publishOutputs();
+  } catch (const std::exception& e) {  // bad_alloc for a huge map: nothing may leave a callback
+    NODELET_ERROR_THROTTLE(kWarnThrottleS, "could not publish the map outputs: %s", e.what());
+  }
+}
+
+void OctomapAccumulator::publishOutputs() {
   // Each output is built only while someone listens: a marker array of a
   // large map costs more than many updates.
   const auto wanted = [](const ros::Publisher& pub) { return pub.getNumSubscribers() > 0; };
@@ -274,7 +283,12 @@ void OctomapAccumulator::publish(const ros::TimerEvent&) {
 
 bool OctomapAccumulator::getMap(bool binary, GetOctomap::Request&, GetOctomap::Response& response) {
   std::lock_guard<std::mutex> lock(mutex_);
-  toMsg(fusion_->map().tree(), binary, mapHeader(), &response.map);
+  try {
+    toMsg(fusion_->map().tree(), binary, mapHeader(), &response.map);
+  } catch (const std::exception& e) {  // nothing may leave a callback
+    NODELET_ERROR("could not serialise the map for %s: %s", binary ? "octomap_binary" : "octomap_full", e.what());
+    return false;
+  }
   return true;
 }
 
@@ -286,7 +300,14 @@ bool OctomapAccumulator::clearBox(BoundingBoxQuery::Request& request, BoundingBo
     return false;
   }
   std::lock_guard<std::mutex> lock(mutex_);
-  const size_t cleared = fusion_->clearBox(lo, hi);
+  size_t cleared = 0;
+  try {
+    cleared = fusion_->clearBox(lo, hi);
+  } catch (const std::exception& e) {  // bad_alloc for a huge box: nothing may leave a callback
+    NODELET_ERROR("clear_bbx failed: %s", e.what());
+    changed_since_publish_ = true;
+    return false;
+  }
   changed_since_publish_ = true;
   NODELET_INFO("clear_bbx: cleared %lu occupied cells in [%.2f, %.2f, %.2f] .. [%.2f, %.2f, %.2f]",
                static_cast<unsigned long>(cleared), lo.x(), lo.y(), lo.z(), hi.x(), hi.y(), hi.z());
