@@ -214,12 +214,19 @@ bool MapAccumulator::integrate(const GridUpdateView& update, std::string* why) {
   // is about a third faster than the storage order (docs/performance.md).
   // admits() put every block inside the key range.
   AccumulatingOcTree::LeafUpdater updater(tree_.get());
+  // Consecutive sibling blocks mostly lie in the same change-tracking block:
+  // the set is asked only when the block differs from the last one.
+  uint64_t last_block = ~uint64_t{0};
   update.forEachSiblingBlock([&](const Eigen::Vector3i& g, const float(&values)[8]) {
     const octomap::OcTreeKey first(static_cast<octomap::key_type>(g.x() + offset),
                                    static_cast<octomap::key_type>(g.y() + offset),
                                    static_cast<octomap::key_type>(g.z() + offset));
     updater.addSiblings(first, values);  // = updateNode(key, log_odds, lazy) per cell
-    if (!all_changed_) changed_blocks_.insert(packBlock(Eigen::Vector3i(blockOf(g.x()), blockOf(g.y()), blockOf(g.z()))));
+    if (!all_changed_) {
+      const uint64_t block = packBlock(Eigen::Vector3i(blockOf(g.x()), blockOf(g.y()), blockOf(g.z())));
+      if (block != last_block) changed_blocks_.insert(block);
+      last_block = block;
+    }
   });
   inner_stale_ = true;
   if (W_recent_origins_.size() < kPruneOrigins) {

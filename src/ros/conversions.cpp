@@ -189,6 +189,14 @@ void toMsg(const octomap::OcTree& tree, bool binary, const std_msgs::Header& hea
   msg->data.assign(bytes.begin(), bytes.end());
 }
 
+std::unique_ptr<octomap::OcTree> treeFromMsg(const Octomap& msg) {
+  if (msg.id != "OcTree" || !(msg.resolution > 0.0)) return nullptr;
+  auto tree = std::make_unique<octomap::OcTree>(msg.resolution);
+  std::stringstream data(std::string(msg.data.begin(), msg.data.end()));
+  const bool read = static_cast<bool>(msg.binary ? tree->readBinaryData(data) : tree->readData(data));
+  return read ? std::move(tree) : nullptr;
+}
+
 namespace {
 
 /// Opacity of the free cells' markers: the occupied ones show through.

@@ -192,9 +192,9 @@ TEST(Conversions, OctreeToMessageAndBack) {
   EXPECT_TRUE(msg.binary);
   EXPECT_EQ(msg.id, "OcTree");
   EXPECT_DOUBLE_EQ(msg.resolution, 0.25);
-  std::stringstream data(std::string(msg.data.begin(), msg.data.end()));
-  octomap::OcTree back(msg.resolution);
-  back.readBinaryData(data);
+  const std::unique_ptr<octomap::OcTree> back_tree = treeFromMsg(msg);
+  ASSERT_TRUE(back_tree);
+  const octomap::OcTree& back = *back_tree;
   ASSERT_NE(back.search(1.1, 2.2, 0.3), nullptr);
   EXPECT_TRUE(back.isNodeOccupied(back.search(1.1, 2.2, 0.3)));
   EXPECT_FALSE(back.isNodeOccupied(back.search(-3.0, 0.2, 1.0)));
@@ -216,11 +216,13 @@ TEST(Conversions, OctreeToMessageAndBack) {
   toMsg(tree, false, header, &full);
   EXPECT_FALSE(full.binary);
   EXPECT_EQ(full.id, "OcTree");
-  std::stringstream full_data(std::string(full.data.begin(), full.data.end()));
-  octomap::OcTree full_back(full.resolution);
-  full_back.readData(full_data);
-  ASSERT_NE(full_back.search(1.1, 2.2, 0.3), nullptr);
-  EXPECT_FLOAT_EQ(full_back.search(1.1, 2.2, 0.3)->getLogOdds(), tree.search(1.1, 2.2, 0.3)->getLogOdds());
+  const std::unique_ptr<octomap::OcTree> full_back = treeFromMsg(full);
+  ASSERT_TRUE(full_back);
+  ASSERT_NE(full_back->search(1.1, 2.2, 0.3), nullptr);
+  EXPECT_FLOAT_EQ(full_back->search(1.1, 2.2, 0.3)->getLogOdds(), tree.search(1.1, 2.2, 0.3)->getLogOdds());
+  Octomap other = full;
+  other.id = "ColorOcTree";  // not ours to read as an OcTree
+  EXPECT_FALSE(treeFromMsg(other));
 }
 
 TEST(Messages, ServicesAreWireCompatibleWithOctomapMsgs) {

@@ -193,9 +193,9 @@ TEST_F(MappingTest, UpdatesMapSaveAndDroppedImages) {
   }
   EXPECT_TRUE(map->binary);
   EXPECT_EQ(map->id, "OcTree");
-  std::stringstream data(std::string(map->data.begin(), map->data.end()));
-  octomap::OcTree tree(map->resolution);
-  tree.readBinaryData(data);
+  const std::unique_ptr<octomap::OcTree> read = treeFromMsg(*map);
+  ASSERT_TRUE(read);
+  const octomap::OcTree& tree = *read;
   const octomap::OcTreeNode* at_wall = tree.search(12.1, 0.1, 2.1);
   const octomap::OcTreeNode* in_front = tree.search(6.1, 0.1, 2.1);
   ASSERT_NE(at_wall, nullptr);

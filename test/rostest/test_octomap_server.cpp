@@ -34,15 +34,11 @@ using namespace stereo_occupancy;
 
 namespace {
 
-/// The map of a GetOctomap answer.
+/// The map of a GetOctomap answer or an Octomap message (a readable OcTree, asserted).
 std::unique_ptr<octomap::OcTree> treeOf(const Octomap& msg) {
-  auto tree = std::make_unique<octomap::OcTree>(msg.resolution);
-  std::stringstream data(std::string(msg.data.begin(), msg.data.end()));
-  if (msg.binary)
-    tree->readBinaryData(data);
-  else
-    tree->readData(data);
-  return tree;
+  std::unique_ptr<octomap::OcTree> tree = treeFromMsg(msg);
+  EXPECT_TRUE(tree) << "an Octomap message that is no readable OcTree";
+  return tree ? std::move(tree) : std::make_unique<octomap::OcTree>(0.1);
 }
 
 /// The projected map's cell at (x, y) [m]; -2 outside it.

@@ -17,7 +17,7 @@
 
 #include <cstring>
 #include <mutex>
-#include <sstream>
+#include <memory>
 #include <string>
 
 #include "stereo_occupancy/GetOctomap.h"
@@ -113,7 +113,6 @@ TEST(StereoPipeline, StereoImageProcDisparitiesMapTheScene) {
 
   // The map, once it holds the mapped frames.
   ASSERT_TRUE(ros::service::waitForService("/octomap_full", ros::Duration(10.0)));
-  octomap::OcTree map(0.1);
   const StereoCameraModel camera = [&] {
     StereoCameraConfig c;
     c.width_px = size.width;
@@ -128,9 +127,9 @@ TEST(StereoPipeline, StereoImageProcDisparitiesMapTheScene) {
   for (int attempt = 0; attempt < 30; ++attempt, ros::WallDuration(0.3).sleep()) {
     GetOctomap get;
     ASSERT_TRUE(ros::service::call("/octomap_full", get));
-    std::stringstream data(std::string(get.response.map.data.begin(), get.response.map.data.end()));
-    map.clear();
-    map.readData(data);
+    const std::unique_ptr<octomap::OcTree> got = treeFromMsg(get.response.map);
+    ASSERT_TRUE(got);
+    const octomap::OcTree& map = *got;
     // The true surfaces, every 4th pixel: occupied within one cell; the
     // points halfway to them: not occupied.
     surface = surface_found = before = before_occupied = 0;

@@ -6,7 +6,7 @@
 #include <stereo_msgs/DisparityImage.h>
 #include <tf2_ros/transform_broadcaster.h>
 
-#include <sstream>
+#include <memory>
 #include <string>
 
 #include "stereo_occupancy/GetOctomap.h"
@@ -68,23 +68,22 @@ TEST(TwoHeads, BothCamerasCellsArriveInOneMap) {
   }
   ASSERT_TRUE(ros::service::waitForService("/octomap_full", ros::Duration(10.0)));
   bool both = false;
-  octomap::OcTree map(0.25);
+  std::unique_ptr<octomap::OcTree> map;
   for (int attempt = 0; attempt < 50 && !both; ++attempt, ros::WallDuration(0.2).sleep()) {
     GetOctomap get;
     ASSERT_TRUE(ros::service::call("/octomap_full", get));
-    std::stringstream data(std::string(get.response.map.data.begin(), get.response.map.data.end()));
-    map.clear();
-    map.readData(data);
-    const octomap::OcTreeNode* wall = map.search(12.1, 0.1, 10.1);
-    const octomap::OcTreeNode* ground = map.search(0.1, 0.1, -0.1);  // the cell just below z = 0
-    both = wall && map.isNodeOccupied(wall) && ground && map.isNodeOccupied(ground);
+    map = treeFromMsg(get.response.map);
+    ASSERT_TRUE(map);
+    const octomap::OcTreeNode* wall = map->search(12.1, 0.1, 10.1);
+    const octomap::OcTreeNode* ground = map->search(0.1, 0.1, -0.1);  // the cell just below z = 0
+    both = wall && map->isNodeOccupied(wall) && ground && map->isNodeOccupied(ground);
   }
   EXPECT_TRUE(both) << "the map lacks the forward camera's wall or the downward camera's ground";
   // Free space seen by each: in front of the wall, and below the vehicle.
-  const octomap::OcTreeNode* ahead = map.search(6.1, 0.1, 10.1);
-  const octomap::OcTreeNode* below = map.search(0.1, 0.1, 5.1);
+  const octomap::OcTreeNode* ahead = map->search(6.1, 0.1, 10.1);
+  const octomap::OcTreeNode* below = map->search(0.1, 0.1, 5.1);
   ASSERT_NE(ahead, nullptr);
   ASSERT_NE(below, nullptr);
-  EXPECT_FALSE(map.isNodeOccupied(ahead));
-  EXPECT_FALSE(map.isNodeOccupied(below));
+  EXPECT_FALSE(map->isNodeOccupied(ahead));
+  EXPECT_FALSE(map->isNodeOccupied(below));
 }

@@ -11,6 +11,7 @@
 #include <visualization_msgs/MarkerArray.h>
 
 #include <Eigen/Geometry>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -66,6 +67,10 @@ bool viewOf(const OccupancyUpdate& msg, GridUpdateView* view, std::string* why);
 /// The tree as an octomap_msgs/Octomap-compatible message: binary (.bt
 /// content) or full (.ot content, log-odds).
 void toMsg(const octomap::OcTree& tree, bool binary, const std_msgs::Header& header, Octomap* msg);
+
+/// The tree a toMsg() message carries (binary or full), or null if it is not
+/// an OcTree's or its data cannot be read.
+std::unique_ptr<octomap::OcTree> treeFromMsg(const Octomap& msg);
 
 /// Occupied leaves (@p occupied) or free leaves as cube lists, one marker per
 /// leaf size: occupied ones coloured by height (namespace "occupied_cells"),
