@@ -29,6 +29,12 @@ online_offline_status=$?
 RESULTS="$results" BAG="$repo/build/online_offline/flight.bag" OUT="$repo/build/rviz/rviz_test.png" \
   "$repo/scripts/render_rviz.sh"
 rviz_status=$?
+# The core and its gtests for aarch64 (the vehicle's ARM computer), with
+# Debian's cross compiler, run under qemu-user (about 5 minutes).
+RESULTS="$results" "$repo/scripts/cross_aarch64.sh" > "$ws/build/aarch64.log" 2>&1
+aarch64_status=$?
+tail -n 1 "$ws/build/aarch64.log"
+[ $aarch64_status = 0 ] || { echo "aarch64 core tests FAILED:"; tail -40 "$ws/build/aarch64.log"; }
 # The README and docs/: links resolve, commands name what exists.
 RESULTS="$results" "$repo/scripts/check_docs.sh"
 docs_status=$?
@@ -46,6 +52,7 @@ failed=$(cat build/test_results/*/*.xml | grep -oE '<(failure|error)[ >]' | wc -
 [ $online_offline_status = 0 ] || [ -f "$results/online_offline.xml" ] || failed=$((failed + 1))
 [ $rviz_status = 0 ] || [ -f "$results/rviz.xml" ] || failed=$((failed + 1))
 [ $docs_status = 0 ] || [ -f "$results/docs.xml" ] || failed=$((failed + 1))
+[ $aarch64_status = 0 ] || [ -f "$results/aarch64-core.xml" ] || failed=$((failed + 1))
 echo "tests: $((cases - failed)) passed, $failed failed"
 [ $status = 0 ] && [ $sanitize_status = 0 ] && [ $fuzz_status = 0 ] && [ $online_offline_status = 0 ] &&
-  [ $rviz_status = 0 ] && [ $docs_status = 0 ]
+  [ $rviz_status = 0 ] && [ $docs_status = 0 ] && [ $aarch64_status = 0 ]

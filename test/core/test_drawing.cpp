@@ -328,7 +328,9 @@ TEST_F(LineDrawing, LineCellsCarryTheModelValue) {
           const Eigen::Vector3d on_ray = g0 + dir * (l / 0.25);
           const Eigen::Vector3i cell(x, y, z);
           for (int axis = 0; axis < 3; ++axis)
-            if (axis != m) ASSERT_EQ(cell[axis], static_cast<int>(std::floor(on_ray[axis]))) << "trial " << trial;
+            if (axis != m) {
+              ASSERT_EQ(cell[axis], static_cast<int>(std::floor(on_ray[axis]))) << "trial " << trial;
+            }
           ++checked;
         }
     ASSERT_GE(checked + 2, n);
@@ -347,7 +349,9 @@ TEST_F(LineDrawing, LineLeavingTheGridSkipsOutsideCells) {
   EXPECT_LE(written, 10u);
   EXPECT_GE(written, 8u);
   for (size_t i = 0; i < grid.numCells(); ++i)
-    if (grid.data()[i] != LocalGrid::kUnknown) EXPECT_NEAR(grid.data()[i], model.freeLogOdds(), 1e-5);
+    if (grid.data()[i] != LocalGrid::kUnknown) {
+      EXPECT_NEAR(grid.data()[i], model.freeLogOdds(), 1e-5);
+    }
   // A ray starting outside the grid writes nothing.
   LocalGrid far;
   far.reset(Eigen::Vector3i(100, 100, 100), Eigen::Vector3i(4, 4, 4), 0.25);
@@ -370,8 +374,9 @@ TEST(Drawing, TinyPositiveDisparitiesAreInfinitelyFar) {
       size_t occupied = 0;
       for (size_t i = 0; i < grid.numCells(); ++i) occupied += grid.data()[i] > 0.0f;
       EXPECT_EQ(occupied, 0u) << toString(a) << " " << tiny;
-      if (tiny >= std::numeric_limits<float>::min())  // a denormal counts as no measurement
+      if (tiny >= std::numeric_limits<float>::min()) {  // a denormal counts as no measurement
         EXPECT_GT(stats.different_grid_cells, 1000u) << toString(a) << " " << tiny;
+      }
     }
   }
 }
@@ -393,7 +398,9 @@ TEST(Drawing, DifferentCellsCountedOnRequest) {
     const DrawStatistics stats = drawer.drawInto(image, T, &grid);
     EXPECT_GT(stats.grid_cells_drawn, 100000u);
     EXPECT_EQ(stats.different_grid_cells, count ? grid.countKnown() : 0u) << count;
-    if (count) EXPECT_GT(stats.different_grid_cells, 40000u);
+    if (count) {
+      EXPECT_GT(stats.different_grid_cells, 40000u);
+    }
   }
 }
 
