@@ -21,6 +21,8 @@ for ((i = 0; i < ${#scenes[@]}; i += 2)); do
   [ $((i + 1)) -lt ${#scenes[@]} ] && run "${scenes[i + 1]}"
   wait
 done
+# One real stereo pair (opencv-doc's Aloe images, StereoSGBM): under a second.
+"$ws/devel/lib/stereo_occupancy/evaluate_stereo_pair" --resolution 0.1 --resolution 0.05 > "$tmp/real.md"
 /usr/bin/python3 - "$tmp" "$out" "$repo/docs/quality_analysis.md" <<'PY'
 import sys
 tmp, out, analysis = sys.argv[1:4]
@@ -112,6 +114,17 @@ good (recall: within 0.5 points).
     f.write('\nTargets: bounded line drawing with occupied recall within 1 % of `line`, '
             'surface called free ≤ 0.5 %, time ≤ 2× `line_pyramid`; bounded ray tracing with precision '
             'within 2 % of `raytrace` at ≤ 2× `raytrace_pyramid`.\n\n')
+    f.write('''
+## Real stereo
+
+One real rectified pair with true disparities, matched by OpenCV's
+StereoSGBM, mapped from the same disparity image by the default and by
+OctoMap (`evaluate_stereo_pair --resolution 0.1 --resolution 0.05`, under a
+second; [docs/tools.md](tools.md#evaluate_stereo_pair) says how it scores):
+
+''')
+    f.write(open(f'{tmp}/real.md').read())
+    f.write('\n')
     f.write(open(analysis).read())
     for s in scenes:
         f.write(f'\n## {s}\n\n')

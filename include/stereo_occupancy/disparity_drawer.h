@@ -72,6 +72,15 @@ struct DrawingConfig {
 
   /// The ranges of forEachParameter(), and max_grid_cells >= 1.
   bool isValid(std::string* why = nullptr) const;
+
+  /// What the mapper draws by default: these defaults with the surface
+  /// profile (docs/quality.md); the paper's Gaussian stays the sensor
+  /// model's own default, for Table I and the reference tests.
+  static DrawingConfig mapperDefaults() {
+    DrawingConfig d;
+    d.sensor_model.profile = SensorProfile::kSurface;
+    return d;
+  }
 };
 
 /// True if T_W_C is finite with an orthonormal, right-handed rotation.

@@ -72,4 +72,22 @@ bool parametersInRange(const Config& config, std::string* why) {
   return ok;
 }
 
+/// Sets the numeric parameter called @p name of @p config to @p value (not
+/// range-checked: isValid() does that); false if @p config has no numeric
+/// parameter of that name. For tools that take NAME=VALUE.
+template <typename Config>
+bool setNumberParameter(Config* config, const std::string& name, double value) {
+  bool found = false;
+  Config::forEachParameter(*config, [&](const ParameterSpec& spec, auto& member) {
+    using T = std::decay_t<decltype(member)>;
+    if constexpr (kIsNumberParameter<T>) {
+      if (name == spec.name) {
+        member = static_cast<T>(value);
+        found = true;
+      }
+    }
+  });
+  return found;
+}
+
 }  // namespace stereo_occupancy

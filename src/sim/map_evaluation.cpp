@@ -151,4 +151,53 @@ MapQuality evaluateMap(const octomap::OcTree& map, const SyntheticScene& scene, 
   return q;
 }
 
+std::unordered_set<uint64_t> surfaceCells(const std::vector<Eigen::Vector3d>& W_points, double resolution_m) {
+  std::unordered_set<uint64_t> cells;
+  for (const Eigen::Vector3d& p : W_points) cells.insert(packCell(LocalGrid::globalIndex(p, resolution_m)));
+  return cells;
+}
+
+MapQuality evaluateAgainstSurface(const octomap::OcTree& map, const std::unordered_set<uint64_t>& surface,
+                                  const std::function<bool(const Eigen::Vector3d&)>& counted) {
+  MapQuality q;
+  const double c = map.getResolution();
+  auto nearSurface = [&](const Eigen::Vector3i& g) {
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx)
+          if (surface.count(packCell(g + Eigen::Vector3i(dx, dy, dz)))) return true;
+    return false;
+  };
+  for (auto it = map.begin_leafs(), end = map.end_leafs(); it != end; ++it) {
+    if (!map.isNodeOccupied(*it)) continue;
+    const int cells = std::max(1, static_cast<int>(std::lround(it.getSize() / c)));
+    const Eigen::Vector3d corner = Eigen::Vector3d(it.getX(), it.getY(), it.getZ()).array() - 0.5 * it.getSize();
+    for (int z = 0; z < cells; ++z)
+      for (int y = 0; y < cells; ++y)
+        for (int x = 0; x < cells; ++x) {
+          const Eigen::Vector3d centre = corner + (Eigen::Vector3d(x, y, z).array() + 0.5).matrix() * c;
+          if (!counted(centre)) continue;
+          ++q.occupied_cells;
+          q.occupied_at_surface += nearSurface(LocalGrid::globalIndex(centre, c));
+        }
+  }
+  for (uint64_t key : surface) {
+    const Eigen::Vector3i g = unpackCell(key);
+    ++q.truth_surface_cells;
+    const Eigen::Vector3d p((g.cast<double>().array() + 0.5).matrix() * c);
+    const octomap::OcTreeNode* own = map.search(p.x(), p.y(), p.z());
+    if (own && !map.isNodeOccupied(own)) ++q.surface_called_free;
+    bool found = false;
+    for (int dz = -1; dz <= 1 && !found; ++dz)
+      for (int dy = -1; dy <= 1 && !found; ++dy)
+        for (int dx = -1; dx <= 1 && !found; ++dx) {
+          const Eigen::Vector3d n = p + Eigen::Vector3d(dx, dy, dz) * c;
+          const octomap::OcTreeNode* node = map.search(n.x(), n.y(), n.z());
+          found = node && map.isNodeOccupied(node);
+        }
+    q.surface_found += found;
+  }
+  return q;
+}
+
 }  // namespace stereo_occupancy

@@ -50,8 +50,9 @@ const char* kUsage =
     "NAME: posts, houses, forest, wires, posts_far, forest_far\n"
     "--truth-pixel-step: true surface cells from every N-th pixel (default 4; 1 finds wires)\n"
     "--algorithm: only these drawing algorithms (default all six); --no-octomap: leave OctoMap out\n"
-    "--model NAME=VALUE: k_m, p_min, p_max, tail_sigmas, surface (1: the surface profile), p_hit, p_free, p_sky,\n"
-    "  free_gap_sigmas, delta_d_px of the drawing (repeatable)\n";
+    "--model NAME=VALUE: a numeric parameter of the sensor model (k_m, p_hit, ... as in config/mapping.yaml),\n"
+    "  surface (1: the surface profile) or delta_d_px of the drawing (repeatable)\n"
+    "--map NAME=VALUE: a numeric parameter of the map (clamping_min_prob, ...; repeatable)\n";
 
 int run(int argc, char** argv) {
   std::string scenario_name = "posts";
@@ -61,7 +62,7 @@ int run(int argc, char** argv) {
   bool resolution_given = false;
   int truth_pixel_step = 4;
   std::vector<so::DrawingAlgorithm> algorithms;
-  std::map<std::string, double> model_values;
+  std::map<std::string, double> model_values, map_values;
   bool with_octomap = true;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -82,11 +83,11 @@ int run(int argc, char** argv) {
       if (!so::parseDrawingAlgorithm(name, &algorithm))
         throw tools::UsageError("--algorithm must be one of " + so::drawingAlgorithmNames());
       algorithms.push_back(algorithm);
-    } else if (a == "--model") {  // name=value of the sensor model, repeatable
+    } else if (a == "--model" || a == "--map") {  // name=value of the sensor model or the map, repeatable
       const std::string kv = tools::nextValue(argc, argv, &i);
       const size_t eq = kv.find('=');
-      if (eq == std::string::npos) throw tools::UsageError("--model takes NAME=VALUE");
-      model_values[kv.substr(0, eq)] = tools::parseNumber(a, kv.substr(eq + 1));
+      if (eq == std::string::npos) throw tools::UsageError(a + " takes NAME=VALUE");
+      (a == "--model" ? model_values : map_values)[kv.substr(0, eq)] = tools::parseNumber(a, kv.substr(eq + 1));
     } else if (a == "--no-octomap") {
       with_octomap = false;
     } else if (a == "--resolution") {  // repeatable
@@ -179,22 +180,20 @@ int run(int argc, char** argv) {
       config.sensor_model.profile = profile;
       so::StereoCameraConfig camera_config = scenario.camera;
       for (const auto& [name, value] : model_values) {
-        if (name == "k_m") config.sensor_model.k_m = value;
-        else if (name == "p_min") config.sensor_model.p_min = value;
-        else if (name == "p_max") config.sensor_model.p_max = value;
-        else if (name == "tail_sigmas") config.sensor_model.tail_sigmas = value;
-        else if (name == "surface") config.sensor_model.profile = value != 0.0 ? so::SensorProfile::kSurface
-                                                                                : so::SensorProfile::kGaussian;
-        else if (name == "p_hit") config.sensor_model.p_hit = value;
-        else if (name == "p_free") config.sensor_model.p_free = value;
-        else if (name == "p_sky") config.sensor_model.p_sky = value;
-        else if (name == "free_gap_sigmas") config.sensor_model.free_gap_sigmas = value;
+        if (name == "surface") config.sensor_model.profile = value != 0.0 ? so::SensorProfile::kSurface
+                                                                          : so::SensorProfile::kGaussian;
         else if (name == "delta_d_px") camera_config.delta_d_px = value;
-        else throw tools::UsageError("--model: unknown name '" + name + "'");
+        else if (!so::setNumberParameter(&config.sensor_model, name, value))
+          throw tools::UsageError("--model: unknown name '" + name + "'");
       }
       so::DisparityDrawer drawer(camera_config, config);
       so::MapAccumulatorConfig map_config;
+      for (const auto& [name, value] : map_values)
+        if (!so::setNumberParameter(&map_config, name, value))
+          throw tools::UsageError("--map: unknown name '" + name + "'");
       map_config.resolution_m = res;
+      std::string why;
+      if (!map_config.isValid(&why)) throw tools::UsageError("--map: " + why);
       so::MapAccumulator map(map_config);
       so::LocalGrid grid;
       so::GridUpdate update;

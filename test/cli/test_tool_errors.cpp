@@ -87,8 +87,15 @@ TEST(ToolErrors, BenchmarksAndFigures) {
   const std::string compare = COMPARE_OCTOMAP_EXE, table1 = TABLE1_EXE, figures = MAKE_FIGURES_EXE;
   expectError("compare_octomap",
               {compare + " --scenario mars", compare + " --frame-step x", compare + " --frame-step 0",
-               compare + " --resolution 0", compare + " --resolution nan", compare + " --truth-pixel-step"},
+               compare + " --resolution 0", compare + " --resolution nan", compare + " --truth-pixel-step",
+               compare + " --model p_hot=0.7 --frame-step 100", compare + " --map clamping_min_prob=0.7 --frame-step 100"},
               2);
+  const std::string pair = EVALUATE_STEREO_PAIR_EXE;
+  expectError("evaluate_stereo_pair",
+              {pair + " --shrink 0", pair + " --resolution 0", pair + " --model p_hot=0.7", pair + " --frobnicate",
+               pair + " --algorithm bresenham"},
+              2);
+  expectError("evaluate_stereo_pair", {pair + " --left /nonexistent.png"}, 1);
   expectError("table1", {table1 + " --repeat 0", table1 + " --repeat x", table1 + " --frobnicate"}, 2);
   expectError("scaling", {std::string(SCALING_EXE) + " --repeat 0", std::string(SCALING_EXE) + " --frobnicate"}, 2);
   const std::string performance = PERFORMANCE_EXE;

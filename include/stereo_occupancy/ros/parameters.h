@@ -29,15 +29,9 @@ struct DisparityMapperParameters {
   int max_image_pixels = 4096 * 4096;  ///< larger images are refused
   /// Range limits and Δd; size, f, b, cx, cy come with each image.
   StereoCameraConfig camera;
-  /// The core's drawing defaults, but for the profile: the mapper draws the
-  /// surface profile (docs/quality.md), the paper's Gaussian stays selectable.
-  DrawingConfig drawing = surfaceDrawing();
-
-  static DrawingConfig surfaceDrawing() {
-    DrawingConfig d;
-    d.sensor_model.profile = SensorProfile::kSurface;
-    return d;
-  }
+  /// The mapper's drawing defaults (the surface profile; the paper's
+  /// Gaussian stays selectable).
+  DrawingConfig drawing = DrawingConfig::mapperDefaults();
 
   /// The parameters (stereo_occupancy/parameter_table.h): f(spec, member)
   /// for each, the drawing's included.

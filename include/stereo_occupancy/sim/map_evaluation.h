@@ -5,6 +5,7 @@
 #include <octomap/OcTree.h>
 
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <string>
 #include <unordered_set>
@@ -98,5 +99,16 @@ size_t countCalledFree(const LocalGrid& grid, const std::vector<Eigen::Vector3i>
 /// and the observed truth, counting the cells within @p band only.
 MapQuality evaluateMap(const octomap::OcTree& map, const SyntheticScene& scene, const ObservedGroundTruth& truth,
                        const RangeBand& band = RangeBand());
+
+/// The cells (packCell keys) holding @p W_points at cells of @p resolution_m.
+std::unordered_set<uint64_t> surfaceCells(const std::vector<Eigen::Vector3d>& W_points, double resolution_m);
+
+/// Scores @p map against true surface cells alone (a real scene: no solids,
+/// so no phantom count): an occupied cell is precise within one cell of a
+/// surface cell; only the occupied cells whose centre @p counted accepts
+/// (where the truth knows what is there) are scored. Occupied leaves larger
+/// than one cell count as the cells they cover.
+MapQuality evaluateAgainstSurface(const octomap::OcTree& map, const std::unordered_set<uint64_t>& surface,
+                                  const std::function<bool(const Eigen::Vector3d&)>& counted);
 
 }  // namespace stereo_occupancy
