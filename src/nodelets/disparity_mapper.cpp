@@ -112,6 +112,7 @@ class DisparityMapper : public nodelet::Nodelet {
   uint64_t filter_dropped_ = 0;  ///< images the tf filter dropped (no pose in time); the pipeline counts the rest
   double last_processing_ms_ = 0.0, max_processing_ms_ = 0.0;
   std::vector<double> processing_ms_;  ///< per image, for the summary at shutdown (bounded)
+  std::vector<double> window_processing_ms_;  ///< per image since the last diagnostics report
   /// The same span in the callback thread's CPU time: the work without the
   /// waits for a core that other threads and processes hold.
   std::vector<double> processing_cpu_ms_;
@@ -373,6 +374,7 @@ void DisparityMapper::process(const char* what, MapImage&& map_image) {
     processing_ms_.push_back(last_processing_ms_);
     processing_cpu_ms_.push_back(threadCpuMs() - start_cpu_ms);
   }
+  if (window_processing_ms_.size() < kMaxTimings) window_processing_ms_.push_back(last_processing_ms_);
 }
 
 void DisparityMapper::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
@@ -394,6 +396,11 @@ void DisparityMapper::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
   status.add("time jumps back", time_jumps_back_);
   status.add("last processing time [ms]", last_processing_ms_);
   status.add("max processing time [ms]", max_processing_ms_);
+  // Since the last report (1 s): what a soak plots over time.
+  const TimeStatistics window = TimeStatistics::of(window_processing_ms_);
+  window_processing_ms_.clear();
+  status.add("processing time p50 since last report [ms]", window.median_ms);
+  status.add("processing time p99 since last report [ms]", window.p99_ms);
 }
 
 }  // namespace stereo_occupancy

@@ -63,6 +63,7 @@ class OctomapAccumulator : public nodelet::Nodelet {
   bool last_save_failed_ = false;  ///< diagnostics ERROR until a save succeeds again
   double last_fusion_ms_ = 0.0, max_fusion_ms_ = 0.0;
   std::vector<double> fusion_ms_;  ///< per update, for the summary at shutdown (bounded)
+  std::vector<double> window_fusion_ms_;  ///< per update since the last diagnostics report
   std::string last_problem_;
   bool changed_since_publish_ = true;
 
@@ -212,6 +213,7 @@ void OctomapAccumulator::updateCallback(const ros::MessageEvent<const OccupancyU
   last_fusion_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   max_fusion_ms_ = std::max(max_fusion_ms_, last_fusion_ms_);
   if (fusion_ms_.size() < kMaxTimings) fusion_ms_.push_back(last_fusion_ms_);
+  if (window_fusion_ms_.size() < kMaxTimings) window_fusion_ms_.push_back(last_fusion_ms_);
   if (!frame_chosen) NODELET_INFO("the map is in frame '%s' (the first update's)", fusion_->frameId().c_str());
   changed_since_publish_ = true;
 }
@@ -370,6 +372,12 @@ void OctomapAccumulator::diagnose(diagnostic_updater::DiagnosticStatusWrapper& s
   status.add("leaves pruned (max_extent_m)", n.leaves_pruned);
   status.add("last fusion time [ms]", last_fusion_ms_);
   status.add("max fusion time [ms]", max_fusion_ms_);
+  // Since the last report (1 s): what a soak plots over time.
+  const TimeStatistics window = TimeStatistics::of(window_fusion_ms_);
+  window_fusion_ms_.clear();
+  status.add("updates fused since last report", window.count);
+  status.add("fusion time p50 since last report [ms]", window.median_ms);
+  status.add("fusion time p99 since last report [ms]", window.p99_ms);
 }
 
 }  // namespace stereo_occupancy
