@@ -48,7 +48,7 @@ struct InverseSensorModelConfig {
   /// measurement's own cell (nothing behind a surface is ever seen).
   double tail_sigmas = 3.0;
   /// kSurface: occupancy probability of the cell that holds the measurement.
-  double p_hit = 0.7;
+  double p_hit = 0.6;
   /// kSurface: occupancy probability of the free space before the gap.
   double p_free = 0.3;
   /// kSurface: occupancy probability along a ray that measured no range (zero
@@ -59,6 +59,11 @@ struct InverseSensorModelConfig {
   double p_sky = 0.3;
   /// kSurface: the gap in front of l_p without information, in units of Δl.
   double free_gap_sigmas = 1.0;
+  /// kSurface: within this many cells (Chebyshev) of a cell the same image
+  /// measured as occupied, a ray without a range says nothing. A thin wire
+  /// or trunk is matched in some pixels and missed in their neighbours, whose
+  /// sky rays would otherwise call its cells free (docs/quality.md). 0: off.
+  int sky_guard_cells = 1;
 
   /// The parameters (parameter_table.h): f(spec, member) for each.
   template <typename Self, typename F>
@@ -71,6 +76,9 @@ struct InverseSensorModelConfig {
       c.p_sky);
     f(numberParameter("free_gap_sigmas", "Δl", 0.0, 4.0, "surface: no information this far before the measurement"),
       c.free_gap_sigmas);
+    f(numberParameter("sky_guard_cells", "cells", 0, 2,
+                      "surface: a ray without a range says nothing this near a cell the image measured"),
+      c.sky_guard_cells);
     f(numberParameter("tail_sigmas", "Δl", 0.0, 3.0, "gaussian: how far behind the peak a measurement speaks"),
       c.tail_sigmas);
     f(numberParameter("k_m", "m", 0.001, 10.0, "significance k of one measurement (eq. 9)"), c.k_m);
@@ -83,7 +91,7 @@ struct InverseSensorModelConfig {
   bool operator==(const InverseSensorModelConfig& o) const {
     return profile == o.profile && k_m == o.k_m && p_min == o.p_min && p_max == o.p_max &&
            tail_sigmas == o.tail_sigmas && p_hit == o.p_hit && p_free == o.p_free && p_sky == o.p_sky &&
-           free_gap_sigmas == o.free_gap_sigmas;
+           free_gap_sigmas == o.free_gap_sigmas && sky_guard_cells == o.sky_guard_cells;
   }
 };
 
@@ -204,6 +212,10 @@ class LogOddsTable {
 
   double cellSize() const { return cell_size_m_; }
   float freeLogOdds() const { return free_log_odds_; }
+  /// Log-odds along a ray that measured no range. For the surface profile one
+  /// float step below p_sky's, so that a cell a measured ray also crosses
+  /// holds that ray's value (the max) and silenceNearOccupied() can tell the two apart.
+  float skyLogOdds() const { return sky_log_odds_; }
 
  private:
   double cell_size_m_;

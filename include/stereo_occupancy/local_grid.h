@@ -72,6 +72,12 @@ class LocalGrid {
   /// Number of cells that are not kUnknown.
   size_t countKnown() const;
 
+  /// Sets the cells holding exactly @p value within @p radius cells
+  /// (Chebyshev) of an occupied cell (log-odds > 0) to 0, no information;
+  /// returns how many. With value = the sky's log-odds: a ray that measured
+  /// no range says nothing next to what the image did measure.
+  size_t silenceNearOccupied(float value, int radius);
+
  private:
   Eigen::Vector3i origin_index_ = Eigen::Vector3i::Zero();
   Eigen::Vector3i size_ = Eigen::Vector3i::Zero();
@@ -111,6 +117,22 @@ inline bool blockHasInformation(const float* cells) {
 #else
   bool hit = false;
   for (int j = 0; j < kInformationBlock; ++j) hit |= cells[j] != LocalGrid::kUnknown && cells[j] != 0.0f;
+  return hit;
+#endif
+}
+
+/// True if one of the kInformationBlock cells from @p cells is occupied
+/// (log-odds > 0): lets silenceNearOccupied() skip a frame's grid 16 cells
+/// at a time (SSE2 where available).
+inline bool blockHasOccupied(const float* cells) {
+#if defined(__SSE2__)
+  const __m128 zero = _mm_setzero_ps();
+  __m128 hit = zero;
+  for (int j = 0; j < kInformationBlock; j += 4) hit = _mm_or_ps(hit, _mm_cmpgt_ps(_mm_loadu_ps(cells + j), zero));
+  return _mm_movemask_ps(hit) != 0;
+#else
+  bool hit = false;
+  for (int j = 0; j < kInformationBlock; ++j) hit |= cells[j] > 0.0f;
   return hit;
 #endif
 }

@@ -167,6 +167,8 @@ DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::
         ray_tracer_.drawPyramidBounded(min_pyramid_, max_pyramid_, *bound_, T_W_C, grid, &stats);
       break;
   }
+  if (config_.sensor_model.profile == SensorProfile::kSurface)
+    grid->silenceNearOccupied(table_.skyLogOdds(), config_.sensor_model.sky_guard_cells);
   if (config_.count_different_cells) stats.different_grid_cells = grid->countKnown();
   return stats;
 }

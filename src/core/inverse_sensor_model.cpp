@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "stereo_occupancy/stereo_camera_model.h"
 
@@ -82,8 +83,10 @@ LogOddsTable::LogOddsTable(const InverseSensorModel& model, double cell_size_m)
   const int samples = static_cast<int>((kFrontSigmas + kTailSigmas) * kSamplesPerSigma);
   row_length_ = samples + 2;  // one sample of padding for the interpolation at the tail
   free_log_odds_ = static_cast<float>(model.freeLogOdds());
-  sky_log_odds_ = cfg.profile == SensorProfile::kSurface ? static_cast<float>(std::log(cfg.p_sky / (1.0 - cfg.p_sky)))
-                                                         : free_log_odds_;
+  sky_log_odds_ = cfg.profile == SensorProfile::kSurface
+                      ? std::nextafter(static_cast<float>(std::log(cfg.p_sky / (1.0 - cfg.p_sky))),
+                                       -std::numeric_limits<float>::infinity())
+                      : free_log_odds_;
   // One extra row so that the row above the last one exists for the interpolation.
   values_.resize(static_cast<size_t>(kPeakRows + 1) * row_length_);
   for (int r = 0; r <= kPeakRows; ++r) {

@@ -18,6 +18,34 @@ void LocalGrid::reset(const Eigen::Vector3i& origin_index, const Eigen::Vector3i
 
 void LocalGrid::clear() { std::fill(data_.begin(), data_.end(), kUnknown); }
 
+size_t LocalGrid::silenceNearOccupied(float value, int radius) {
+  if (radius <= 0) return 0;
+  size_t silenced = 0;
+  auto silenceAround = [&](int x, int y, int z) {
+    for (int k = std::max(0, z - radius); k <= std::min(size_.z() - 1, z + radius); ++k)
+      for (int j = std::max(0, y - radius); j <= std::min(size_.y() - 1, y + radius); ++j)
+        for (int h = std::max(0, x - radius); h <= std::min(size_.x() - 1, x + radius); ++h) {
+          float& cell = data_[linearIndex(h, j, k)];
+          if (cell == value) {
+            cell = 0.0f;
+            ++silenced;
+          }
+        }
+  };
+  for (int z = 0; z < size_.z(); ++z)
+    for (int y = 0; y < size_.y(); ++y) {
+      const float* row = &data_[linearIndex(0, y, z)];
+      for (int x = 0; x < size_.x(); ++x) {
+        if (x % kInformationBlock == 0 && x + kInformationBlock <= size_.x() && !blockHasOccupied(row + x)) {
+          x += kInformationBlock - 1;  // nothing occupied in these 16 cells
+          continue;
+        }
+        if (row[x] > 0.0f) silenceAround(x, y, z);
+      }
+    }
+  return silenced;
+}
+
 size_t LocalGrid::countKnown() const {
   // Counted on the bits, in 32-bit lanes that vectorise (a float compare
   // with a 64-bit count does not); chunks keep the lanes from overflowing.

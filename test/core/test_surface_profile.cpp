@@ -73,9 +73,9 @@ TEST(SurfaceProfile, ExactModelAndTableAgree) {
   const InverseSensorModel model(surfaceConfig());
   const LogOddsTable table(model, kCell);
   const double l_p = 15.0, dl = 0.6;
-  EXPECT_NEAR(model.logOddsHat(l_p, l_p, dl, kCell), logit(0.7), 1e-12);
-  EXPECT_NEAR(model.logOddsHat(l_p - 0.12, l_p, dl, kCell), logit(0.7), 1e-12);   // the window holds l_p
-  EXPECT_NEAR(model.logOddsHat(l_p + 0.12, l_p, dl, kCell), logit(0.7), 1e-12);
+  EXPECT_NEAR(model.logOddsHat(l_p, l_p, dl, kCell), logit(0.6), 1e-12);
+  EXPECT_NEAR(model.logOddsHat(l_p - 0.12, l_p, dl, kCell), logit(0.6), 1e-12);   // the window holds l_p
+  EXPECT_NEAR(model.logOddsHat(l_p + 0.12, l_p, dl, kCell), logit(0.6), 1e-12);
   EXPECT_EQ(model.logOddsHat(l_p - 0.125 - 0.3, l_p, dl, kCell), 0.0);             // in the gap (0.6 m)
   EXPECT_NEAR(model.logOddsHat(l_p - 0.125 - 0.61, l_p, dl, kCell), logit(0.3), 1e-12);  // before it
   EXPECT_EQ(model.logOddsHat(l_p + 0.2, l_p, dl, kCell), 0.0);                     // behind: nothing
@@ -189,4 +189,71 @@ TEST(SurfaceProfile, BoundedPyramidKeepsThinObstacles) {
     EXPECT_EQ(occupied, cells);
     EXPECT_EQ(free, 0);
   }
+}
+
+// A 2 cm wire against the sky that the matcher misses in every other stretch
+// of 40 pixel columns (too thin to match there: zero disparity, as sky). The
+// missed pixels' sky rays cross the wire's cells beside the matched ones:
+// without the sky guard they call some of them free; with it (the default,
+// one cell) none, while the sky a metre above the wire stays free.
+TEST(SurfaceProfile, SkyGuardKeepsAPartlyMatchedWire) {
+  SyntheticScene scene;
+  scene.addBox({10.1 - 0.01, -4.0, 3.1 - 0.01}, {10.1 + 0.01, 4.0, 3.1 + 0.01});
+  const StereoCameraModel cam{StereoCameraConfig()};
+  cv::Mat disparity = renderDisparity(scene, cam, camera());
+  int matched = 0, missed = 0;
+  for (int y = 0; y < disparity.rows; ++y)
+    for (int x = 0; x < disparity.cols; ++x) {
+      float& d = disparity.at<float>(y, x);
+      if (!(d > 0.0f)) continue;
+      if ((x / 40) % 2) {
+        d = 0.0f;
+        ++missed;
+      } else {
+        ++matched;
+      }
+    }
+  ASSERT_GT(matched, 50);
+  ASSERT_GT(missed, 50);
+  auto wireCellsCalledFree = [&](int guard_cells, int* sky_free) {
+    DrawingConfig config = surfaceDrawing(DrawingAlgorithm::kLinePyramidBounded);
+    config.sensor_model.sky_guard_cells = guard_cells;
+    DisparityDrawer drawer(StereoCameraConfig(), config);
+    LocalGrid grid;
+    drawer.draw(disparity, camera(), &grid);
+    int free = 0;
+    *sky_free = 0;
+    for (double y = -3.5; y < 3.5; y += kCell) {
+      const float wire = valueAt(grid, {10.1, y, 3.1}), sky = valueAt(grid, {10.1, y, 4.1});
+      free += wire < 0.0f && wire != LocalGrid::kUnknown;
+      *sky_free += sky < 0.0f && sky != LocalGrid::kUnknown;
+    }
+    return free;
+  };
+  int sky_free_unguarded = 0, sky_free_guarded = 0;
+  EXPECT_GT(wireCellsCalledFree(0, &sky_free_unguarded), 3);
+  EXPECT_EQ(wireCellsCalledFree(1, &sky_free_guarded), 0);
+  EXPECT_EQ(sky_free_guarded, sky_free_unguarded);
+  EXPECT_GT(sky_free_guarded, 20);
+}
+
+// The guard itself: only cells holding exactly the given value, only within
+// the radius of an occupied cell, and nothing at radius 0.
+TEST(SurfaceProfile, SilenceNearOccupiedTouchesOnlyTheSkyNearHits) {
+  LocalGrid grid;
+  grid.reset({0, 0, 0}, {8, 8, 8}, kCell);
+  const float sky = -0.8f, free = -0.7f;
+  for (size_t i = 0; i < grid.numCells(); ++i) grid.data()[i] = sky;
+  grid.at(4, 4, 4) = 0.9f;
+  grid.at(5, 4, 4) = free;
+  EXPECT_EQ(grid.silenceNearOccupied(sky, 0), 0u);
+  EXPECT_EQ(grid.silenceNearOccupied(sky, 1), 25u);  // the 26 neighbours but the one measured free
+  EXPECT_EQ(grid.at(3, 3, 3), 0.0f);
+  EXPECT_EQ(grid.at(5, 4, 4), free);
+  EXPECT_EQ(grid.at(2, 4, 4), sky);
+  EXPECT_EQ(grid.at(4, 4, 4), 0.9f);
+  grid.at(0, 0, 0) = 0.9f;  // at the grid's corner: stays inside
+  // Around (4, 4, 4) the 124 within two cells but the 26 within one; around
+  // the corner 26, one of them, (2, 2, 2), shared.
+  EXPECT_EQ(grid.silenceNearOccupied(sky, 2), (124u - 26u) + 26u - 1u);
 }
