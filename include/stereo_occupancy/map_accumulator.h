@@ -5,6 +5,8 @@
 
 #include <octomap/OcTree.h>
 
+#include <Eigen/Geometry>
+
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -77,12 +79,16 @@ class MapAccumulator {
 
   /// Drops the cells farther than max_extent_m (per axis) from the bounding
   /// box of the last kPruneOrigins sensor origins: no single update, however
-  /// far its origin, can make the map drop what the vehicle is near. Returns
-  /// how many leaves were dropped.
+  /// far its origin, can make the map drop what the vehicle is near. Does
+  /// nothing while the map lies within kPruneSlack · max_extent_m beyond
+  /// that (a prune rebuilds the tree). Returns how many leaves were dropped.
   size_t prune();
 
   /// Sensor origins that prune() keeps the map around.
   static constexpr size_t kPruneOrigins = 100;
+  /// How far beyond max_extent_m the map may grow before prune() drops
+  /// anything, as a share of max_extent_m.
+  static constexpr double kPruneSlack = 0.25;
 
   /// Empties the map.
   void reset();
@@ -124,12 +130,17 @@ class MapAccumulator {
 
   MapAccumulatorConfig config_;
   std::unique_ptr<AccumulatingOcTree> tree_;
+  /// Box of everything the map may hold (the updates' boxes, a loaded map's
+  /// bounds), cut to the extent by prune() [m].
+  Eigen::AlignedBox3d W_extent_;
   std::vector<Eigen::Vector3d> W_recent_origins_;  ///< ring of the last kPruneOrigins sensor origins
   size_t next_origin_ = 0;                          ///< where the next one goes in the ring
   size_t updates_ = 0;
   mutable bool inner_stale_ = false;  ///< inner nodes lag the leaves until tree() is called
+  /// Adds the blocks @p leaf spans to @p blocks (packed BlockIndex).
+  void insertBlocksOf(const octomap::OcTree::leaf_iterator& leaf, std::unordered_set<uint64_t>* blocks) const;
   std::unordered_set<uint64_t> changed_blocks_;  ///< packed BlockIndex of the blocks changed
-  bool all_changed_ = true;                      ///< the whole map changed (reset, load, clearBox, prune)
+  bool all_changed_ = true;                      ///< the whole map changed (reset, load, clearBox)
 };
 
 }  // namespace stereo_occupancy

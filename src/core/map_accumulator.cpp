@@ -68,24 +68,25 @@ int blockOf(int g) {
 
 }  // namespace
 
+void MapAccumulator::insertBlocksOf(const octomap::OcTree::leaf_iterator& leaf, std::unordered_set<uint64_t>* blocks) const {
+  // A coarse leaf: each block it spans.
+  const int offset = static_cast<int>(tree_->coordToKey(0.0));
+  const octomap::OcTreeKey first = leaf.getIndexKey();
+  const int side = 1 << (tree_->getTreeDepth() - leaf.getDepth());
+  const int step = std::min(side, kBlockCells);
+  for (int dz = 0; dz < side; dz += step)
+    for (int dy = 0; dy < side; dy += step)
+      for (int dx = 0; dx < side; dx += step)
+        blocks->insert(packBlock(Eigen::Vector3i(blockOf(first[0] + dx - offset), blockOf(first[1] + dy - offset),
+                                                 blockOf(first[2] + dz - offset))));
+}
+
 std::vector<MapAccumulator::BlockIndex> MapAccumulator::takeChangedBlocks(bool* all) {
   *all = all_changed_;
   std::vector<BlockIndex> blocks;
   if (all_changed_) {
-    // Every block that holds a leaf (a coarse leaf: each block it spans).
-    std::unordered_set<uint64_t> seen;
-    const int offset = static_cast<int>(tree_->coordToKey(0.0));
-    const unsigned depth = tree_->getTreeDepth();
-    for (auto it = tree().begin_leafs(), end = tree().end_leafs(); it != end; ++it) {
-      const octomap::OcTreeKey first = it.getIndexKey();
-      const int side = 1 << (depth - it.getDepth());
-      const int step = std::min(side, kBlockCells);
-      for (int dz = 0; dz < side; dz += step)
-        for (int dy = 0; dy < side; dy += step)
-          for (int dx = 0; dx < side; dx += step)
-            seen.insert(packBlock(Eigen::Vector3i(blockOf(first[0] + dx - offset), blockOf(first[1] + dy - offset),
-                                                  blockOf(first[2] + dz - offset))));
-    }
+    std::unordered_set<uint64_t> seen;  // every block that holds a leaf
+    for (auto it = tree().begin_leafs(), end = tree().end_leafs(); it != end; ++it) insertBlocksOf(it, &seen);
     for (uint64_t p : seen) blocks.push_back(unpackBlock(p));
   } else {
     for (uint64_t p : changed_blocks_) blocks.push_back(unpackBlock(p));
@@ -104,6 +105,7 @@ void MapAccumulator::reset() {
   updates_ = 0;
   W_recent_origins_.clear();
   next_origin_ = 0;
+  W_extent_.setEmpty();
 }
 
 void MapAccumulator::load(const std::string& path) {
@@ -128,6 +130,12 @@ void MapAccumulator::load(const std::string& path) {
     loaded->setLeaf(it.getKey(), it.getDepth(), std::clamp(it->getLogOdds(), lo, hi));
   loaded->updateInnerOccupancy();
   reset();
+  if (loaded->size() > 0) {
+    double x0, y0, z0, x1, y1, z1;
+    loaded->getMetricMin(x0, y0, z0);
+    loaded->getMetricMax(x1, y1, z1);
+    W_extent_ = Eigen::AlignedBox3d(Eigen::Vector3d(x0, y0, z0), Eigen::Vector3d(x1, y1, z1));
+  }
   tree_ = std::move(loaded);
   applyThresholds();
 }
@@ -235,6 +243,8 @@ bool MapAccumulator::integrate(const GridUpdateView& update, std::string* why) {
     W_recent_origins_[next_origin_] = update.W_sensor_origin;
     next_origin_ = (next_origin_ + 1) % kPruneOrigins;
   }
+  const Eigen::Vector3d W_lo = update.origin_index.cast<double>() * config_.resolution_m;
+  W_extent_.extend(W_lo).extend(W_lo + update.size.cast<double>() * config_.resolution_m);
   ++updates_;
   return true;
 }
@@ -246,12 +256,24 @@ size_t MapAccumulator::prune() {
   for (const auto& p : W_recent_origins_) recent.extend(p);
   const Eigen::Array3d lo = recent.min().array() - config_.max_extent_m;
   const Eigen::Array3d hi = recent.max().array() + config_.max_extent_m;
+  // Nothing to do until the map reaches a slack beyond the extent: each
+  // prune rebuilds the tree, which must not happen at every update of a long flight.
+  const double slack_m = kPruneSlack * config_.max_extent_m;
+  if (W_extent_.isEmpty() || ((W_extent_.min().array() >= lo - slack_m).all() &&
+                              (W_extent_.max().array() <= hi + slack_m).all()))
+    return 0;
+  W_extent_ = W_extent_.intersection(Eigen::AlignedBox3d(lo.matrix(), hi.matrix()));
   auto inside = [&](const octomap::OcTree::leaf_iterator& it) {
     const Eigen::Array3d p(it.getX(), it.getY(), it.getZ());
     return (p >= lo).all() && (p <= hi).all();
   };
+  // The dropped leaves' blocks change (the outputs delete them); the rest do not.
   size_t outside = 0;
-  for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it) outside += !inside(it);
+  for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it) {
+    if (inside(it)) continue;
+    ++outside;
+    if (!all_changed_) insertBlocksOf(it, &changed_blocks_);
+  }
   if (outside == 0) return 0;
   auto kept = std::make_unique<AccumulatingOcTree>(config_.resolution_m);
   for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it)
@@ -259,7 +281,6 @@ size_t MapAccumulator::prune() {
   kept->updateInnerOccupancy();
   tree_ = std::move(kept);
   applyThresholds();
-  all_changed_ = true;  // the dropped blocks must go from the outputs too
   return outside;
 }
 

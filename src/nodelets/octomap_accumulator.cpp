@@ -111,7 +111,14 @@ void OctomapAccumulator::onInit() {
         fusion_->markAllChanged();
         changed_since_publish_ = true;
       });
-  free_markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>("free_cells_vis_array", 1, /*latch=*/true);
+  // Free cells as the occupied ones: the changed blocks, the whole map for a new subscriber.
+  free_markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>(
+      "free_cells_vis_array", 10, [this](const ros::SingleSubscriberPublisher&) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (!fusion_) return;
+        fusion_->markAllChanged();
+        changed_since_publish_ = true;
+      });
   cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("octomap_point_cloud_centers", 1, /*latch=*/true);
   projected_pub_ = nh.advertise<nav_msgs::OccupancyGrid>("projected_map", 1, /*latch=*/true);
   octomap_binary_srv_ = nh.advertiseService<GetOctomap::Request, GetOctomap::Response>(
@@ -255,21 +262,22 @@ void OctomapAccumulator::publishOutputs() {
     toMsg(tree, binary, header, msg.get());
     pub.publish(msg);
   }
-  if (wanted(markers_pub_)) {
+  // Both marker arrays from the one set of changed blocks.
+  if (wanted(markers_pub_) || wanted(free_markers_pub_)) {
     bool all = false;
     const std::vector<MapAccumulator::BlockIndex> blocks = fusion_->takeChangedBlocks(&all);
-    if (all || !blocks.empty()) {
+    if ((all || !blocks.empty()) && wanted(markers_pub_)) {
       auto msg = boost::make_shared<visualization_msgs::MarkerArray>();
       blockMarkers(tree, blocks, all, header, msg.get());
       markers_pub_.publish(msg);
     }
+    if ((all || !blocks.empty()) && wanted(free_markers_pub_)) {
+      auto msg = boost::make_shared<visualization_msgs::MarkerArray>();
+      freeBlockMarkers(tree, blocks, all, header, msg.get());
+      free_markers_pub_.publish(msg);
+    }
   } else {
     fusion_->markAllChanged();  // nobody to send changes to: the next subscriber gets the whole map
-  }
-  if (wanted(free_markers_pub_)) {
-    auto msg = boost::make_shared<visualization_msgs::MarkerArray>();
-    cellMarkers(tree, /*occupied=*/false, header, msg.get());
-    free_markers_pub_.publish(msg);
   }
   if (wanted(cloud_pub_)) {
     auto msg = boost::make_shared<sensor_msgs::PointCloud2>();

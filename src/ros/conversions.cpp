@@ -4,6 +4,7 @@
 #include <sensor_msgs/point_cloud2_iterator.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <map>
@@ -221,42 +222,6 @@ std_msgs::ColorRGBA heightColour(double z, double z_min, double z_max) {
 
 }  // namespace
 
-void cellMarkers(const octomap::OcTree& tree, bool occupied, const std_msgs::Header& header,
-                 visualization_msgs::MarkerArray* markers) {
-  double x0, y0, z_min, x1, y1, z_max;
-  tree.getMetricMin(x0, y0, z_min);
-  tree.getMetricMax(x1, y1, z_max);
-  const unsigned depth = tree.getTreeDepth();
-  markers->markers.assign(depth + 1, visualization_msgs::Marker());
-  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
-    if (tree.isNodeOccupied(*it) != occupied) continue;
-    auto& m = markers->markers[it.getDepth()];
-    geometry_msgs::Point p;
-    p.x = it.getX();
-    p.y = it.getY();
-    p.z = it.getZ();
-    m.points.push_back(p);
-    if (occupied) m.colors.push_back(heightColour(p.z, z_min, z_max));
-  }
-  for (unsigned d = 0; d <= depth; ++d) {
-    auto& m = markers->markers[d];
-    m.header = header;
-    m.ns = occupied ? "occupied_cells" : "free_cells";
-    m.id = static_cast<int>(d);
-    m.type = visualization_msgs::Marker::CUBE_LIST;
-    const double size = tree.getNodeSize(d);
-    m.scale.x = m.scale.y = m.scale.z = size;
-    m.pose.orientation.w = 1.0;
-    if (occupied) {
-      m.color.a = 1.0f;
-    } else {
-      m.color.g = 1.0f;
-      m.color.a = kFreeMarkerAlpha;
-    }
-    m.action = m.points.empty() ? visualization_msgs::Marker::DELETE : visualization_msgs::Marker::ADD;
-  }
-}
-
 void blockMarkers(const octomap::OcTree& tree, const std::vector<Eigen::Vector3i>& blocks, bool all,
                   const std_msgs::Header& header, visualization_msgs::MarkerArray* markers) {
   constexpr int kBlock = MapAccumulator::kBlockCells;
@@ -308,6 +273,61 @@ void blockMarkers(const octomap::OcTree& tree, const std::vector<Eigen::Vector3i
     }
     m.action = m.points.empty() ? visualization_msgs::Marker::DELETE : visualization_msgs::Marker::ADD;
     markers->markers.push_back(std::move(m));
+  }
+}
+
+void freeBlockMarkers(const octomap::OcTree& tree, const std::vector<Eigen::Vector3i>& blocks, bool all,
+                      const std_msgs::Header& header, visualization_msgs::MarkerArray* markers) {
+  constexpr int kBlock = MapAccumulator::kBlockCells;
+  constexpr int kBlocksPerAxis = 65536 / kBlock;  // the key range in blocks
+  constexpr int kSizes = 5;                        // leaf sides 1, 2, 4, 8, 16 cells
+  static_assert(kBlock == 1 << (kSizes - 1), "one marker per leaf size up to the block's");
+  const int offset = static_cast<int>(tree.coordToKey(0.0));  // key of global index 0
+  const unsigned depth = tree.getTreeDepth();
+  const double c = tree.getResolution();
+  markers->markers.clear();
+  if (all) {
+    visualization_msgs::Marker clear;
+    clear.header = header;
+    clear.action = visualization_msgs::Marker::DELETEALL;
+    markers->markers.push_back(clear);
+  }
+  for (const Eigen::Vector3i& b : blocks) {
+    std::array<visualization_msgs::Marker, kSizes> m;
+    for (int s = 0; s < kSizes; ++s) {
+      m[s].header = header;
+      m[s].ns = "free_cells_z" + std::to_string(b.z()) + "_s" + std::to_string(1 << s);
+      m[s].id = (b.x() + kBlocksPerAxis / 2) * kBlocksPerAxis + (b.y() + kBlocksPerAxis / 2);
+      m[s].type = visualization_msgs::Marker::CUBE_LIST;
+      m[s].scale.x = m[s].scale.y = m[s].scale.z = c * (1 << s);
+      m[s].pose.orientation.w = 1.0;
+      m[s].color.g = 1.0f;
+      m[s].color.a = kFreeMarkerAlpha;
+    }
+    const Eigen::Vector3i lo = b * kBlock, hi = lo + Eigen::Vector3i::Constant(kBlock - 1);
+    auto key = [&](const Eigen::Vector3i& g) {
+      return octomap::OcTreeKey(static_cast<octomap::key_type>(g.x() + offset),
+                                static_cast<octomap::key_type>(g.y() + offset),
+                                static_cast<octomap::key_type>(g.z() + offset));
+    };
+    for (auto it = tree.begin_leafs_bbx(key(lo), key(hi)), end = tree.end_leafs_bbx(); it != end; ++it) {
+      if (tree.isNodeOccupied(*it)) continue;
+      const int side = 1 << (depth - it.getDepth());
+      geometry_msgs::Point p;
+      if (side >= kBlock) {  // the leaf covers the block: draw the block
+        const Eigen::Vector3d centre = (lo.cast<double>().array() + 0.5 * kBlock).matrix() * c;
+        p.x = centre.x(), p.y = centre.y(), p.z = centre.z();
+        m[kSizes - 1].points.push_back(p);
+      } else {
+        p.x = it.getX(), p.y = it.getY(), p.z = it.getZ();
+        m[depth - it.getDepth()].points.push_back(p);
+      }
+    }
+    for (auto& marker : m) {
+      if (all && marker.points.empty()) continue;
+      marker.action = marker.points.empty() ? visualization_msgs::Marker::DELETE : visualization_msgs::Marker::ADD;
+      markers->markers.push_back(std::move(marker));
+    }
   }
 }
 

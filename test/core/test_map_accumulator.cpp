@@ -128,10 +128,17 @@ TEST(MapAccumulator, PruneKeepsTheMapWithinItsExtent) {
   GridUpdate near = singleCell(Eigen::Vector3i(4, 0, 0), 1.0f);
   near.W_sensor_origin = Eigen::Vector3d(1.0, 0.0, 0.0);
   for (size_t i = 0; i < MapAccumulator::kPruneOrigins; ++i) ASSERT_TRUE(map.integrate(near));
+  bool all = false;
+  map.takeChangedBlocks(&all);
   EXPECT_EQ(map.prune(), 1u);
   EXPECT_EQ(map.tree().search(50.1, 0.1, 0.1), nullptr);
   EXPECT_NE(map.tree().search(0.1, 0.1, 0.1), nullptr);
   EXPECT_EQ(map.tree().getNumLeafNodes(), 2u);
+  // The outputs delete the dropped cell's block and republish nothing else.
+  const std::vector<MapAccumulator::BlockIndex> changed = map.takeChangedBlocks(&all);
+  EXPECT_FALSE(all);
+  ASSERT_EQ(changed.size(), 1u);
+  EXPECT_EQ(changed[0], Eigen::Vector3i(12, 0, 0));  // cell 200 / 16
 }
 
 // One update far away (an empty one, or one cell 5 km off with its origin
@@ -335,6 +342,32 @@ TEST(MapAccumulator, ClearBoxLeavesNothingOccupiedInside) {
   EXPECT_EQ(occupied_inside, 0u);
   EXPECT_EQ(occupied_outside, 16u * 16u * 16u - 64u);
   EXPECT_EQ(map.clearBox(Eigen::Vector3d(0.5, 0.5, 0.5), Eigen::Vector3d(1.49, 1.49, 1.49)), 0u);  // nothing left
+}
+
+// A map within the slack beyond its extent is left as it is (a prune
+// rebuilds the tree); once it reaches past the slack, everything beyond the
+// extent goes, the cell within the slack too.
+TEST(MapAccumulator, PruneWaitsForTheSlack) {
+  MapAccumulatorConfig cfg;
+  cfg.max_extent_m = 10.0;
+  MapAccumulator map(cfg);
+  GridUpdate near = singleCell(Eigen::Vector3i(0, 0, 0), 1.0f);
+  for (size_t i = 0; i < MapAccumulator::kPruneOrigins; ++i) ASSERT_TRUE(map.integrate(near));
+  // 12 m away: beyond the extent of 10 m, within its slack of 2.5 m. The
+  // vehicle then stays near the origin until that update's origin leaves
+  // the ring of recent origins.
+  ASSERT_TRUE(map.integrate(singleCell(Eigen::Vector3i(48, 0, 0), 1.0f)));
+  for (size_t i = 0; i < MapAccumulator::kPruneOrigins; ++i) ASSERT_TRUE(map.integrate(near));
+  EXPECT_EQ(map.prune(), 0u);
+  EXPECT_NE(map.tree().search(12.1, 0.1, 0.1), nullptr);
+  GridUpdate beyond = singleCell(Eigen::Vector3i(60, 0, 0), 1.0f);  // 15 m: past the slack
+  ASSERT_TRUE(map.integrate(beyond));
+  for (size_t i = 0; i < MapAccumulator::kPruneOrigins; ++i) ASSERT_TRUE(map.integrate(near));
+  EXPECT_EQ(map.prune(), 2u);
+  EXPECT_EQ(map.tree().search(12.1, 0.1, 0.1), nullptr);
+  EXPECT_EQ(map.tree().search(15.1, 0.1, 0.1), nullptr);
+  EXPECT_NE(map.tree().search(0.1, 0.1, 0.1), nullptr);
+  EXPECT_EQ(map.prune(), 0u);  // the map is within its extent again
 }
 
 // The blocks an update changed, for outputs that cost what changed: all of

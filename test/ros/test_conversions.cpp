@@ -198,19 +198,6 @@ TEST(Conversions, OctreeToMessageAndBack) {
   ASSERT_NE(back.search(1.1, 2.2, 0.3), nullptr);
   EXPECT_TRUE(back.isNodeOccupied(back.search(1.1, 2.2, 0.3)));
   EXPECT_FALSE(back.isNodeOccupied(back.search(-3.0, 0.2, 1.0)));
-  visualization_msgs::MarkerArray markers;
-  cellMarkers(tree, /*occupied=*/true, header, &markers);
-  size_t points = 0;
-  for (const auto& m : markers.markers) points += m.points.size();
-  EXPECT_EQ(points, 1u);
-  cellMarkers(tree, /*occupied=*/false, header, &markers);
-  points = 0;
-  for (const auto& m : markers.markers) {
-    points += m.points.size();
-    EXPECT_EQ(m.ns, "free_cells");
-    EXPECT_TRUE(m.colors.empty());  // one colour for all
-  }
-  EXPECT_EQ(points, 1u);
   // The full map keeps the log-odds: binary false, as octomap_server's octomap_full.
   Octomap full;
   toMsg(tree, false, header, &full);
@@ -275,4 +262,40 @@ TEST(Conversions, BlockMarkers) {
   EXPECT_NE(markers.markers[1].id, markers.markers[2].id);
   EXPECT_EQ(markers.markers[3].action, visualization_msgs::Marker::DELETE);  // a block without occupied cells
   EXPECT_EQ(markers.markers[1].ns, "occupied_cells_z0");
+}
+
+// A block's free leaves by size: a fine free cell in its own marker, a leaf
+// larger than the block as the whole block; the occupied cell is not drawn;
+// an emptied block is a DELETE per size, the whole map starts with a
+// DELETEALL and leaves the empty sizes out.
+TEST(Conversions, FreeBlockMarkers) {
+  octomap::OcTree tree(0.25);
+  tree.updateNode(octomap::point3d(0.125f, 0.125f, 0.125f), false);  // global cell (0, 0, 0): block (0, 0, 0)
+  tree.updateNode(octomap::point3d(0.375f, 0.125f, 0.125f), true);   // occupied: not drawn
+  for (float x = 8.125f; x < 16.0f; x += 0.25f)  // block (2, 0, 0) and (3, 0, 0) all free: pruned to one leaf
+    for (float y = 0.125f; y < 8.0f; y += 0.25f)
+      for (float z = 0.125f; z < 8.0f; z += 0.25f) tree.updateNode(octomap::point3d(x, y, z), false);
+  tree.prune();
+  std_msgs::Header header;
+  header.frame_id = "map";
+  visualization_msgs::MarkerArray markers;
+  freeBlockMarkers(tree, {Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(2, 0, 0), Eigen::Vector3i(5, 5, 5)}, false,
+                   header, &markers);
+  ASSERT_EQ(markers.markers.size(), 15u);  // 3 blocks, 5 sizes
+  const auto& fine = markers.markers[0];
+  EXPECT_EQ(fine.ns, "free_cells_z0_s1");
+  EXPECT_EQ(fine.action, visualization_msgs::Marker::ADD);
+  ASSERT_EQ(fine.points.size(), 1u);
+  EXPECT_DOUBLE_EQ(fine.points[0].x, 0.125);
+  EXPECT_DOUBLE_EQ(fine.scale.x, 0.25);
+  const auto& whole = markers.markers[9];  // block (2, 0, 0), side 16
+  EXPECT_EQ(whole.ns, "free_cells_z0_s16");
+  ASSERT_EQ(whole.points.size(), 1u);
+  EXPECT_DOUBLE_EQ(whole.points[0].x, 10.0);  // the block's centre
+  EXPECT_DOUBLE_EQ(whole.scale.x, 4.0);
+  for (int s = 10; s < 15; ++s) EXPECT_EQ(markers.markers[s].action, visualization_msgs::Marker::DELETE);
+  freeBlockMarkers(tree, {Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(5, 5, 5)}, true, header, &markers);
+  ASSERT_EQ(markers.markers.size(), 2u);
+  EXPECT_EQ(markers.markers[0].action, visualization_msgs::Marker::DELETEALL);
+  EXPECT_EQ(markers.markers[1].ns, "free_cells_z0_s1");
 }

@@ -18,6 +18,7 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
+#include <map>
 #include <mutex>
 #include <sstream>
 #include <string>
@@ -152,7 +153,8 @@ TEST_F(OctomapServerTest, OutputsAndServicesAsOctomapServer) {
     std::lock_guard<std::mutex> lock(mutex_);
     size_t points = 0;
     for (const auto& m : free_markers->markers) {
-      EXPECT_EQ(m.ns, "free_cells");
+      if (m.action == visualization_msgs::Marker::DELETEALL) continue;
+      EXPECT_EQ(m.ns.rfind("free_cells_z", 0), 0u) << m.ns;
       points += m.points.size();
     }
     EXPECT_GT(points, 100u);
@@ -186,34 +188,44 @@ TEST_F(OctomapServerTest, OutputsAndServicesAsOctomapServer) {
   EXPECT_FALSE(ros::service::call("/octomap_accumulator/clear_bbx", inverted));
 }
 
-// occupied_cells_vis_array costs what changed: a new subscriber gets the
-// whole map (a DELETEALL, then every block), later messages only the blocks
-// that updates changed.
+// occupied_cells_vis_array and free_cells_vis_array cost what changed: a
+// new subscriber gets the whole map (a DELETEALL, then every block), later
+// messages only the blocks that updates changed.
 TEST_F(OctomapServerTest, MarkersCarryOnlyTheChangedBlocks) {
-  std::vector<visualization_msgs::MarkerArrayConstPtr> received;
-  ros::Subscriber sub = nh_.subscribe<visualization_msgs::MarkerArray>(
-      "/occupied_cells_vis_array", 10, [&](const visualization_msgs::MarkerArrayConstPtr& msg) {
-        std::lock_guard<std::mutex> lock(mutex_);
-        received.push_back(msg);
-      });
+  std::map<std::string, std::vector<visualization_msgs::MarkerArrayConstPtr>> received;
+  std::vector<ros::Subscriber> subs;
+  for (const std::string topic : {"occupied_cells_vis_array", "free_cells_vis_array"})
+    subs.push_back(nh_.subscribe<visualization_msgs::MarkerArray>(
+        "/" + topic, 10, [&, topic](const visualization_msgs::MarkerArrayConstPtr& msg) {
+          std::lock_guard<std::mutex> lock(mutex_);
+          received[topic].push_back(msg);
+        }));
+  auto both = [&] {
+    return !received["occupied_cells_vis_array"].empty() && !received["free_cells_vis_array"].empty();
+  };
   mapTheWall();
-  ASSERT_TRUE(waitFor(mutex_, [&] { return !received.empty(); }, 10.0));
-  size_t whole = 0;
+  ASSERT_TRUE(waitFor(mutex_, both, 10.0));
+  std::map<std::string, size_t> whole;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    ASSERT_EQ(received.front()->markers.front().action, visualization_msgs::Marker::DELETEALL);
-    for (const auto& msg : received) whole = std::max(whole, msg->markers.size());
-    received.clear();
+    for (auto& [topic, messages] : received) {
+      ASSERT_EQ(messages.front()->markers.front().action, visualization_msgs::Marker::DELETEALL) << topic;
+      for (const auto& msg : messages) whole[topic] = std::max(whole[topic], msg->markers.size());
+      messages.clear();
+    }
   }
-  // One more frame of the same wall changes some blocks: a message of those only.
+  // One more frame of the same wall changes some blocks: messages of those only.
   mapTheWall();
-  ASSERT_TRUE(waitFor(mutex_, [&] { return !received.empty(); }, 10.0));
+  ASSERT_TRUE(waitFor(mutex_, both, 10.0));
   std::lock_guard<std::mutex> lock(mutex_);
-  for (const auto& msg : received) {
-    ASSERT_FALSE(msg->markers.empty());
-    EXPECT_NE(msg->markers.front().action, visualization_msgs::Marker::DELETEALL);
-    EXPECT_LE(msg->markers.size(), whole);
-    for (const auto& m : msg->markers) EXPECT_EQ(m.ns.rfind("occupied_cells_z", 0), 0u) << m.ns;
+  for (const auto& [topic, messages] : received) {
+    const std::string ns = topic == "free_cells_vis_array" ? "free_cells_z" : "occupied_cells_z";
+    for (const auto& msg : messages) {
+      ASSERT_FALSE(msg->markers.empty()) << topic;
+      EXPECT_NE(msg->markers.front().action, visualization_msgs::Marker::DELETEALL) << topic;
+      EXPECT_LE(msg->markers.size(), whole[topic]) << topic;
+      for (const auto& m : msg->markers) EXPECT_EQ(m.ns.rfind(ns, 0), 0u) << m.ns;
+    }
   }
 }
 

@@ -72,12 +72,6 @@ void toMsg(const octomap::OcTree& tree, bool binary, const std_msgs::Header& hea
 /// an OcTree's or its data cannot be read.
 std::unique_ptr<octomap::OcTree> treeFromMsg(const Octomap& msg);
 
-/// Occupied leaves (@p occupied) or free leaves as cube lists, one marker per
-/// leaf size: occupied ones coloured by height (namespace "occupied_cells"),
-/// free ones a translucent green ("free_cells"), as octomap_server shows them.
-void cellMarkers(const octomap::OcTree& tree, bool occupied, const std_msgs::Header& header,
-                 visualization_msgs::MarkerArray* markers);
-
 /// The occupied cells of @p blocks (MapAccumulator's change-tracking blocks)
 /// as one cube list each, coloured by height over the map's height: a block
 /// is marker (namespace "occupied_cells_z<bz>", id from bx, by) that rviz
@@ -86,6 +80,15 @@ void cellMarkers(const octomap::OcTree& tree, bool occupied, const std_msgs::Hea
 /// blocks that went away go from rviz too.
 void blockMarkers(const octomap::OcTree& tree, const std::vector<Eigen::Vector3i>& blocks, bool all,
                   const std_msgs::Header& header, visualization_msgs::MarkerArray* markers);
+
+/// The free leaves of @p blocks as cube lists, a translucent green as
+/// octomap_server draws them: per block one marker per leaf size of 1, 2, 4, 8
+/// and 16 cells (namespace "free_cells_z<bz>_s<side>", id from bx, by; a leaf
+/// larger than a block is drawn as the block), a DELETE where a block has no
+/// free leaf of that size. With @p all a DELETEALL comes first and the empty
+/// markers are left out.
+void freeBlockMarkers(const octomap::OcTree& tree, const std::vector<Eigen::Vector3i>& blocks, bool all,
+                      const std_msgs::Header& header, visualization_msgs::MarkerArray* markers);
 
 /// The projected map as a nav_msgs/OccupancyGrid in the header's frame (z = 0).
 void toMsg(const ProjectedMap& map, const std_msgs::Header& header, nav_msgs::OccupancyGrid* msg);
