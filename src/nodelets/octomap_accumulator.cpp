@@ -102,23 +102,18 @@ void OctomapAccumulator::onInit() {
   // octomap_server's names and types, latched as there.
   octomap_pub_ = nh.advertise<Octomap>("octomap_binary", 1, /*latch=*/true);
   octomap_full_pub_ = nh.advertise<Octomap>("octomap_full", 1, /*latch=*/true);
-  // Occupied cells a block at a time, only the blocks changed since the last
-  // publish; a new subscriber gets the whole map first.
-  markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>(
-      "occupied_cells_vis_array", 10, [this](const ros::SingleSubscriberPublisher&) {
-        std::lock_guard<std::mutex> lock(mutex_);
-        if (!fusion_) return;
-        fusion_->markAllChanged();
-        changed_since_publish_ = true;
-      });
-  // Free cells as the occupied ones: the changed blocks, the whole map for a new subscriber.
-  free_markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>(
-      "free_cells_vis_array", 10, [this](const ros::SingleSubscriberPublisher&) {
-        std::lock_guard<std::mutex> lock(mutex_);
-        if (!fusion_) return;
-        fusion_->markAllChanged();
-        changed_since_publish_ = true;
-      });
+  // Occupied and free cells a block at a time, only the blocks changed since
+  // the last publish; a new subscriber gets the whole map first.
+  const auto whole_map_for_new_subscriber = [this](const ros::SingleSubscriberPublisher&) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!fusion_) return;
+    fusion_->markAllChanged();
+    changed_since_publish_ = true;
+  };
+  markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>("occupied_cells_vis_array", 10,
+                                                               whole_map_for_new_subscriber);
+  free_markers_pub_ =
+      nh.advertise<visualization_msgs::MarkerArray>("free_cells_vis_array", 10, whole_map_for_new_subscriber);
   cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("octomap_point_cloud_centers", 1, /*latch=*/true);
   projected_pub_ = nh.advertise<nav_msgs::OccupancyGrid>("projected_map", 1, /*latch=*/true);
   octomap_binary_srv_ = nh.advertiseService<GetOctomap::Request, GetOctomap::Response>(

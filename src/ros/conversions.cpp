@@ -220,42 +220,58 @@ std_msgs::ColorRGBA heightColour(double z, double z_min, double z_max) {
   return c;
 }
 
+constexpr int kBlock = MapAccumulator::kBlockCells;
+
+/// A block's marker id, from its x and y (the z goes into the namespace).
+int blockMarkerId(const Eigen::Vector3i& b) {
+  constexpr int kBlocksPerAxis = 65536 / kBlock;  // the key range in blocks
+  return (b.x() + kBlocksPerAxis / 2) * kBlocksPerAxis + (b.y() + kBlocksPerAxis / 2);
+}
+
+/// The first and the last key of block @p b.
+std::pair<octomap::OcTreeKey, octomap::OcTreeKey> blockKeys(const octomap::OcTree& tree, const Eigen::Vector3i& b) {
+  const int offset = static_cast<int>(tree.coordToKey(0.0));  // key of global index 0
+  auto key = [&](const Eigen::Vector3i& g) {
+    return octomap::OcTreeKey(static_cast<octomap::key_type>(g.x() + offset),
+                              static_cast<octomap::key_type>(g.y() + offset),
+                              static_cast<octomap::key_type>(g.z() + offset));
+  };
+  const Eigen::Vector3i lo = b * kBlock;
+  return {key(lo), key(lo + Eigen::Vector3i::Constant(kBlock - 1))};
+}
+
+/// Empties @p markers; for the whole map (@p all) a DELETEALL first.
+void startBlockMarkers(bool all, const std_msgs::Header& header, visualization_msgs::MarkerArray* markers) {
+  markers->markers.clear();
+  if (!all) return;
+  visualization_msgs::Marker clear;
+  clear.header = header;
+  clear.action = visualization_msgs::Marker::DELETEALL;
+  markers->markers.push_back(clear);
+}
+
 }  // namespace
 
 void blockMarkers(const octomap::OcTree& tree, const std::vector<Eigen::Vector3i>& blocks, bool all,
                   const std_msgs::Header& header, visualization_msgs::MarkerArray* markers) {
-  constexpr int kBlock = MapAccumulator::kBlockCells;
-  constexpr int kBlocksPerAxis = 65536 / kBlock;  // the key range in blocks
   double x0, y0, z_min, x1, y1, z_max;
   tree.getMetricMin(x0, y0, z_min);
   tree.getMetricMax(x1, y1, z_max);
   const int offset = static_cast<int>(tree.coordToKey(0.0));  // key of global index 0
   const unsigned depth = tree.getTreeDepth();
   const double c = tree.getResolution();
-  markers->markers.clear();
-  if (all) {
-    visualization_msgs::Marker clear;
-    clear.header = header;
-    clear.action = visualization_msgs::Marker::DELETEALL;
-    markers->markers.push_back(clear);
-  }
+  startBlockMarkers(all, header, markers);
   for (const Eigen::Vector3i& b : blocks) {
     visualization_msgs::Marker m;
     m.header = header;
     m.ns = "occupied_cells_z" + std::to_string(b.z());
-    m.id = (b.x() + kBlocksPerAxis / 2) * kBlocksPerAxis + (b.y() + kBlocksPerAxis / 2);
+    m.id = blockMarkerId(b);
     m.type = visualization_msgs::Marker::CUBE_LIST;
     m.scale.x = m.scale.y = m.scale.z = c;
     m.pose.orientation.w = 1.0;
     m.color.a = 1.0f;
     // The block's keys; a coarse leaf gives the cells of it that the block holds.
-    const Eigen::Vector3i lo = b * kBlock, hi = lo + Eigen::Vector3i::Constant(kBlock - 1);
-    const octomap::OcTreeKey key_lo(static_cast<octomap::key_type>(lo.x() + offset),
-                                    static_cast<octomap::key_type>(lo.y() + offset),
-                                    static_cast<octomap::key_type>(lo.z() + offset));
-    const octomap::OcTreeKey key_hi(static_cast<octomap::key_type>(hi.x() + offset),
-                                    static_cast<octomap::key_type>(hi.y() + offset),
-                                    static_cast<octomap::key_type>(hi.z() + offset));
+    const auto [key_lo, key_hi] = blockKeys(tree, b);
     for (auto it = tree.begin_leafs_bbx(key_lo, key_hi), end = tree.end_leafs_bbx(); it != end; ++it) {
       if (!tree.isNodeOccupied(*it)) continue;
       const octomap::OcTreeKey first = it.getIndexKey();
@@ -278,44 +294,30 @@ void blockMarkers(const octomap::OcTree& tree, const std::vector<Eigen::Vector3i
 
 void freeBlockMarkers(const octomap::OcTree& tree, const std::vector<Eigen::Vector3i>& blocks, bool all,
                       const std_msgs::Header& header, visualization_msgs::MarkerArray* markers) {
-  constexpr int kBlock = MapAccumulator::kBlockCells;
-  constexpr int kBlocksPerAxis = 65536 / kBlock;  // the key range in blocks
-  constexpr int kSizes = 5;                        // leaf sides 1, 2, 4, 8, 16 cells
+  constexpr int kSizes = 5;  // leaf sides 1, 2, 4, 8, 16 cells
   static_assert(kBlock == 1 << (kSizes - 1), "one marker per leaf size up to the block's");
-  const int offset = static_cast<int>(tree.coordToKey(0.0));  // key of global index 0
   const unsigned depth = tree.getTreeDepth();
   const double c = tree.getResolution();
-  markers->markers.clear();
-  if (all) {
-    visualization_msgs::Marker clear;
-    clear.header = header;
-    clear.action = visualization_msgs::Marker::DELETEALL;
-    markers->markers.push_back(clear);
-  }
+  startBlockMarkers(all, header, markers);
   for (const Eigen::Vector3i& b : blocks) {
     std::array<visualization_msgs::Marker, kSizes> m;
     for (int s = 0; s < kSizes; ++s) {
       m[s].header = header;
       m[s].ns = "free_cells_z" + std::to_string(b.z()) + "_s" + std::to_string(1 << s);
-      m[s].id = (b.x() + kBlocksPerAxis / 2) * kBlocksPerAxis + (b.y() + kBlocksPerAxis / 2);
+      m[s].id = blockMarkerId(b);
       m[s].type = visualization_msgs::Marker::CUBE_LIST;
       m[s].scale.x = m[s].scale.y = m[s].scale.z = c * (1 << s);
       m[s].pose.orientation.w = 1.0;
       m[s].color.g = 1.0f;
       m[s].color.a = kFreeMarkerAlpha;
     }
-    const Eigen::Vector3i lo = b * kBlock, hi = lo + Eigen::Vector3i::Constant(kBlock - 1);
-    auto key = [&](const Eigen::Vector3i& g) {
-      return octomap::OcTreeKey(static_cast<octomap::key_type>(g.x() + offset),
-                                static_cast<octomap::key_type>(g.y() + offset),
-                                static_cast<octomap::key_type>(g.z() + offset));
-    };
-    for (auto it = tree.begin_leafs_bbx(key(lo), key(hi)), end = tree.end_leafs_bbx(); it != end; ++it) {
+    const auto [key_lo, key_hi] = blockKeys(tree, b);
+    for (auto it = tree.begin_leafs_bbx(key_lo, key_hi), end = tree.end_leafs_bbx(); it != end; ++it) {
       if (tree.isNodeOccupied(*it)) continue;
       const int side = 1 << (depth - it.getDepth());
       geometry_msgs::Point p;
       if (side >= kBlock) {  // the leaf covers the block: draw the block
-        const Eigen::Vector3d centre = (lo.cast<double>().array() + 0.5 * kBlock).matrix() * c;
+        const Eigen::Vector3d centre = ((b * kBlock).cast<double>().array() + 0.5 * kBlock).matrix() * c;
         p.x = centre.x(), p.y = centre.y(), p.z = centre.z();
         m[kSizes - 1].points.push_back(p);
       } else {

@@ -73,8 +73,11 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     drawing.sensor_model.p_free = in.ranged(0.05, 0.45);
     drawing.sensor_model.p_sky = in.ranged(drawing.sensor_model.p_free, 0.5);
     drawing.sensor_model.free_gap_sigmas = in.ranged(0.0, 4.0);
-    // From a value already read, so that the corpus keeps its meaning.
-    drawing.sensor_model.sky_guard_cells = static_cast<int>(drawing.sensor_model.free_gap_sigmas * 7.0) % 3;
+    // From a value already read, so that the corpus keeps its meaning (that
+    // value may be NaN: no conversion of it to int).
+    const double gap = drawing.sensor_model.free_gap_sigmas;
+    drawing.sensor_model.sky_guard_cells =
+        std::isfinite(gap) ? static_cast<int>(std::fmod(std::fabs(gap) * 7.0, 3.0)) : 1;
   } else {
     drawing.sensor_model.tail_sigmas = in.ranged(0.0, 3.0);
   }
