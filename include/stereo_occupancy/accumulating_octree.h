@@ -49,6 +49,18 @@ class AccumulatingOcTree : public octomap::OcTree {
   /// octomap 1.9's deleteNode leaves the emptied inner nodes' child arrays
   /// behind and trips an assertion, so dropping cells copies the ones to keep.
   void setLeaf(const octomap::OcTreeKey& key, unsigned depth, float log_odds);
+
+  /// Deletes the node of @p key at @p depth with everything below it, and
+  /// the ancestors left without children (a childless inner node would read
+  /// as a coarse leaf). A pruned leaf above @p depth is expanded first, so
+  /// only the node's part of it goes. Work follows the nodes deleted, not the
+  /// tree. Inner nodes are left stale. Returns false if nothing was there.
+  bool dropNode(const octomap::OcTreeKey& key, unsigned depth);
+
+ private:
+  /// Frees everything below @p node, which becomes a leaf: octomap frees a
+  /// node's child array only in pruneNode(), so each level is made prunable.
+  void collapse(octomap::OcTreeNode* node);
 };
 
 // Inline: the accumulator calls it for every cell of every update.

@@ -26,9 +26,10 @@ struct MapAccumulatorConfig {
   double clamping_min_prob = 0.12;   ///< lower clamping bound of a cell (probability)
   double clamping_max_prob = 0.97;   ///< upper clamping bound of a cell (probability)
   double occupancy_threshold_prob = 0.5;  ///< cells above it are occupied (probability)
-  /// Half edge of the cube around the vehicle's recent positions that the map
-  /// keeps; cells outside it are dropped on prune(). 0 keeps everything [m].
-  double max_extent_m = 500.0;
+  /// Half edge of the box around the vehicle's recent positions that the
+  /// live map keeps; cells outside it are dropped on prune() (or moved to a
+  /// mission's database, store/mission_map.h). 0 keeps everything [m].
+  double max_extent_m = 200.0;
   /// Largest box an update may claim (nx·ny·nz); larger ones are refused
   /// before anything is allocated. As DrawingConfig::max_grid_cells.
   uint64_t max_update_cells = uint64_t{64} << 20;
@@ -44,7 +45,7 @@ struct MapAccumulatorConfig {
                       "cells above it are occupied; between the clamping bounds"),
       c.occupancy_threshold_prob);
     f(numberParameter("max_extent_m", "m", 0.0, 100000.0,
-                      "the map keeps this half edge around the vehicle's last positions; 0: everything"),
+                      "the live map keeps this half edge around the vehicle's last positions; 0: everything"),
       c.max_extent_m);
     f(numberParameter("max_update_cells", "cells", 1.0, 2147483647.0, "updates claiming a larger box are refused"),
       c.max_update_cells);
@@ -118,6 +119,37 @@ class MapAccumulator {
   /// The next takeChangedBlocks() returns all blocks (a new subscriber wants the whole map).
   void markAllChanged() { all_changed_ = true; }
 
+  /// Tiles: the octree's nodes at depth kTileDepth, kTileCells cells on an
+  /// edge (64 m at 0.25 m). A mission keeps the tiles it flew away from on
+  /// disk (store/mission_map.h); the accumulator only hands them over.
+  static constexpr unsigned kTileDepth = 8;
+  static constexpr int kTileCells = 1 << (16 - kTileDepth);
+  /// A tile's index: global cell index / kTileCells per axis (rounded down).
+  using TileIndex = Eigen::Vector3i;
+  /// One leaf of the tree: any key inside it, its depth (16: one cell), its log-odds.
+  struct Leaf {
+    octomap::OcTreeKey key;
+    uint8_t depth = 16;
+    float log_odds = 0.0f;
+  };
+  /// The tiles the box of @p update overlaps.
+  std::vector<TileIndex> tilesOf(const GridUpdateView& update) const;
+  /// The tiles that hold leaves.
+  std::vector<TileIndex> tiles() const;
+  /// Box of @p tile in the map's frame [m].
+  Eigen::AlignedBox3d tileBox(const TileIndex& tile) const;
+  /// The box prune() keeps: the last sensor origins' box grown by
+  /// max_extent_m; empty before the first update [m].
+  Eigen::AlignedBox3d keptBox() const;
+  /// Copies of @p tile's leaves (a coarser leaf contributes the tile's part).
+  std::vector<Leaf> tileLeaves(const TileIndex& tile) const;
+  /// Deletes @p tile's leaves; costs what the tile holds. Returns how many went.
+  size_t dropTile(const TileIndex& tile);
+  /// Sets leaves, clamped, in tiles that hold nothing (a tile back from disk).
+  void insertLeaves(const std::vector<Leaf>& leaves);
+  /// The tiles changed since the last call: every tile after a load.
+  std::vector<TileIndex> takeDirtyTiles();
+
   /// Writes <directory>/<base_name>.bt and .ot, each through a temporary file
   /// that is synced to disk and then renamed into place (writeOcTree), so a
   /// crash or a full disk never leaves a half-written map.
@@ -127,6 +159,8 @@ class MapAccumulator {
 
  private:
   void applyThresholds();
+  /// Adds the blocks that the leaf of @p key at @p depth spans to @p blocks (packed BlockIndex).
+  void insertBlocksOf(const octomap::OcTreeKey& key, unsigned depth, std::unordered_set<uint64_t>* blocks) const;
 
   MapAccumulatorConfig config_;
   std::unique_ptr<AccumulatingOcTree> tree_;
@@ -137,9 +171,9 @@ class MapAccumulator {
   size_t next_origin_ = 0;                          ///< where the next one goes in the ring
   size_t updates_ = 0;
   mutable bool inner_stale_ = false;  ///< inner nodes lag the leaves until tree() is called
-  /// Adds the blocks @p leaf spans to @p blocks (packed BlockIndex).
-  void insertBlocksOf(const octomap::OcTree::leaf_iterator& leaf, std::unordered_set<uint64_t>* blocks) const;
   std::unordered_set<uint64_t> changed_blocks_;  ///< packed BlockIndex of the blocks changed
+  std::unordered_set<uint64_t> dirty_tiles_;     ///< packed TileIndex of the tiles changed
+  bool all_dirty_ = false;                       ///< every tile changed (load)
   bool all_changed_ = true;                      ///< the whole map changed (reset, load, clearBox)
 };
 

@@ -61,24 +61,26 @@ Eigen::Vector3i unpackBlock(uint64_t p) {
                          static_cast<int>(static_cast<int64_t>((p >> kPackBits) & mask) - kPackOffset),
                          static_cast<int>(static_cast<int64_t>(p & mask) - kPackOffset));
 }
-/// floor(g / kBlockCells) for negative g too.
-int blockOf(int g) {
-  return g >= 0 ? g / MapAccumulator::kBlockCells : -((-g + MapAccumulator::kBlockCells - 1) / MapAccumulator::kBlockCells);
-}
+/// floor(g / n) for negative g too.
+int floorDiv(int g, int n) { return g >= 0 ? g / n : -((-g + n - 1) / n); }
+int blockOf(int g) { return floorDiv(g, MapAccumulator::kBlockCells); }
+int tileOfBlock(int b) { return floorDiv(b, MapAccumulator::kTileCells / MapAccumulator::kBlockCells); }
 
 }  // namespace
 
-void MapAccumulator::insertBlocksOf(const octomap::OcTree::leaf_iterator& leaf, std::unordered_set<uint64_t>* blocks) const {
+void MapAccumulator::insertBlocksOf(const octomap::OcTreeKey& key, unsigned depth,
+                                    std::unordered_set<uint64_t>* blocks) const {
   // A coarse leaf: each block it spans.
   const int offset = static_cast<int>(tree_->coordToKey(0.0));
-  const octomap::OcTreeKey first = leaf.getIndexKey();
-  const int side = 1 << (tree_->getTreeDepth() - leaf.getDepth());
+  const int side = 1 << (tree_->getTreeDepth() - depth);
+  const int mask = ~(side - 1);  // the leaf's lowest key
   const int step = std::min(side, kBlockCells);
   for (int dz = 0; dz < side; dz += step)
     for (int dy = 0; dy < side; dy += step)
       for (int dx = 0; dx < side; dx += step)
-        blocks->insert(packBlock(Eigen::Vector3i(blockOf(first[0] + dx - offset), blockOf(first[1] + dy - offset),
-                                                 blockOf(first[2] + dz - offset))));
+        blocks->insert(packBlock(Eigen::Vector3i(blockOf((key[0] & mask) + dx - offset),
+                                                 blockOf((key[1] & mask) + dy - offset),
+                                                 blockOf((key[2] & mask) + dz - offset))));
 }
 
 std::vector<MapAccumulator::BlockIndex> MapAccumulator::takeChangedBlocks(bool* all) {
@@ -86,7 +88,8 @@ std::vector<MapAccumulator::BlockIndex> MapAccumulator::takeChangedBlocks(bool* 
   std::vector<BlockIndex> blocks;
   if (all_changed_) {
     std::unordered_set<uint64_t> seen;  // every block that holds a leaf
-    for (auto it = tree().begin_leafs(), end = tree().end_leafs(); it != end; ++it) insertBlocksOf(it, &seen);
+    for (auto it = tree().begin_leafs(), end = tree().end_leafs(); it != end; ++it)
+      insertBlocksOf(it.getKey(), it.getDepth(), &seen);
     for (uint64_t p : seen) blocks.push_back(unpackBlock(p));
   } else {
     for (uint64_t p : changed_blocks_) blocks.push_back(unpackBlock(p));
@@ -99,6 +102,8 @@ std::vector<MapAccumulator::BlockIndex> MapAccumulator::takeChangedBlocks(bool* 
 void MapAccumulator::reset() {
   all_changed_ = true;
   changed_blocks_.clear();
+  all_dirty_ = false;
+  dirty_tiles_.clear();
   inner_stale_ = false;
   tree_ = std::make_unique<AccumulatingOcTree>(config_.resolution_m);
   applyThresholds();
@@ -138,6 +143,7 @@ void MapAccumulator::load(const std::string& path) {
   }
   tree_ = std::move(loaded);
   applyThresholds();
+  all_dirty_ = true;
 }
 
 size_t MapAccumulator::clearBox(const Eigen::Vector3d& W_min, const Eigen::Vector3d& W_max) {
@@ -175,7 +181,13 @@ size_t MapAccumulator::clearBox(const Eigen::Vector3d& W_min, const Eigen::Vecto
                              static_cast<octomap::key_type>(z));
   }
   const float cleared = tree_->getClampingThresMinLog();
-  for (const octomap::OcTreeKey& k : cells) tree_->setNodeValue(k, cleared, /*lazy_eval=*/true);
+  const int offset = static_cast<int>(tree_->coordToKey(0.0));
+  for (const octomap::OcTreeKey& k : cells) {
+    tree_->setNodeValue(k, cleared, /*lazy_eval=*/true);
+    dirty_tiles_.insert(packBlock(Eigen::Vector3i(floorDiv(k[0] - offset, kTileCells),
+                                                  floorDiv(k[1] - offset, kTileCells),
+                                                  floorDiv(k[2] - offset, kTileCells))));
+  }
   inner_stale_ = inner_stale_ || !cells.empty();
   all_changed_ = all_changed_ || !cells.empty();
   return cells.size();
@@ -230,9 +242,11 @@ bool MapAccumulator::integrate(const GridUpdateView& update, std::string* why) {
                                    static_cast<octomap::key_type>(g.y() + offset),
                                    static_cast<octomap::key_type>(g.z() + offset));
     updater.addSiblings(first, values);  // = updateNode(key, log_odds, lazy) per cell
-    if (!all_changed_) {
-      const uint64_t block = packBlock(Eigen::Vector3i(blockOf(g.x()), blockOf(g.y()), blockOf(g.z())));
-      if (block != last_block) changed_blocks_.insert(block);
+    const Eigen::Vector3i b(blockOf(g.x()), blockOf(g.y()), blockOf(g.z()));
+    const uint64_t block = packBlock(b);
+    if (block != last_block) {
+      if (!all_changed_) changed_blocks_.insert(block);
+      dirty_tiles_.insert(packBlock(Eigen::Vector3i(tileOfBlock(b.x()), tileOfBlock(b.y()), tileOfBlock(b.z()))));
       last_block = block;
     }
   });
@@ -272,7 +286,7 @@ size_t MapAccumulator::prune() {
   for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it) {
     if (inside(it)) continue;
     ++outside;
-    if (!all_changed_) insertBlocksOf(it, &changed_blocks_);
+    if (!all_changed_) insertBlocksOf(it.getKey(), it.getDepth(), &changed_blocks_);
   }
   if (outside == 0) return 0;
   auto kept = std::make_unique<AccumulatingOcTree>(config_.resolution_m);
@@ -288,6 +302,120 @@ std::vector<std::string> MapAccumulator::save(const std::string& directory, cons
   std::vector<std::string> paths = {directory + "/" + base_name + ".bt", directory + "/" + base_name + ".ot"};
   for (const auto& p : paths) writeOcTree(tree(), p);
   return paths;
+}
+
+namespace {
+/// The lowest key of @p tile along each axis.
+octomap::OcTreeKey tileFirstKey(const MapAccumulator::TileIndex& tile, int offset) {
+  return octomap::OcTreeKey(static_cast<octomap::key_type>(tile.x() * MapAccumulator::kTileCells + offset),
+                            static_cast<octomap::key_type>(tile.y() * MapAccumulator::kTileCells + offset),
+                            static_cast<octomap::key_type>(tile.z() * MapAccumulator::kTileCells + offset));
+}
+/// The key range holds 2^kTileDepth tiles per axis, centred on 0.
+bool tileInKeyRange(const MapAccumulator::TileIndex& tile) {
+  constexpr int kHalf = (1 << MapAccumulator::kTileDepth) / 2;
+  return (tile.array() >= -kHalf).all() && (tile.array() < kHalf).all();
+}
+}  // namespace
+
+std::vector<MapAccumulator::TileIndex> MapAccumulator::tilesOf(const GridUpdateView& update) const {
+  const Eigen::Vector3i lo = update.origin_index, hi = update.origin_index + update.size - Eigen::Vector3i::Ones();
+  std::vector<TileIndex> tiles;
+  for (int z = floorDiv(lo.z(), kTileCells); z <= floorDiv(hi.z(), kTileCells); ++z)
+    for (int y = floorDiv(lo.y(), kTileCells); y <= floorDiv(hi.y(), kTileCells); ++y)
+      for (int x = floorDiv(lo.x(), kTileCells); x <= floorDiv(hi.x(), kTileCells); ++x) tiles.emplace_back(x, y, z);
+  return tiles;
+}
+
+std::vector<MapAccumulator::TileIndex> MapAccumulator::tiles() const {
+  const int offset = static_cast<int>(tree_->coordToKey(0.0));
+  std::unordered_set<uint64_t> seen;
+  // Leaves at most kTileDepth deep: the tile nodes, and coarser leaves that span several.
+  for (auto it = tree_->begin_leafs(kTileDepth), end = tree_->end_leafs(); it != end; ++it) {
+    const octomap::OcTreeKey first = it.getIndexKey();
+    const int side = 1 << (tree_->getTreeDepth() - it.getDepth());
+    for (int dz = 0; dz < side; dz += kTileCells)
+      for (int dy = 0; dy < side; dy += kTileCells)
+        for (int dx = 0; dx < side; dx += kTileCells)
+          seen.insert(packBlock(Eigen::Vector3i(floorDiv(first[0] + dx - offset, kTileCells),
+                                                floorDiv(first[1] + dy - offset, kTileCells),
+                                                floorDiv(first[2] + dz - offset, kTileCells))));
+  }
+  std::vector<TileIndex> tiles;
+  for (uint64_t p : seen) tiles.push_back(unpackBlock(p));
+  return tiles;
+}
+
+Eigen::AlignedBox3d MapAccumulator::tileBox(const TileIndex& tile) const {
+  const Eigen::Vector3d lo = tile.cast<double>() * (kTileCells * config_.resolution_m);
+  return Eigen::AlignedBox3d(lo, lo + Eigen::Vector3d::Constant(kTileCells * config_.resolution_m));
+}
+
+Eigen::AlignedBox3d MapAccumulator::keptBox() const {
+  Eigen::AlignedBox3d recent;
+  for (const auto& p : W_recent_origins_) recent.extend(p);
+  if (recent.isEmpty()) return recent;
+  const Eigen::Vector3d grow = Eigen::Vector3d::Constant(config_.max_extent_m);
+  return Eigen::AlignedBox3d(recent.min() - grow, recent.max() + grow);
+}
+
+std::vector<MapAccumulator::Leaf> MapAccumulator::tileLeaves(const TileIndex& tile) const {
+  std::vector<Leaf> leaves;
+  if (!tileInKeyRange(tile)) return leaves;
+  const int offset = static_cast<int>(tree_->coordToKey(0.0));
+  const octomap::OcTreeKey lo = tileFirstKey(tile, offset);
+  const octomap::OcTreeKey hi(static_cast<octomap::key_type>(lo[0] + kTileCells - 1),
+                              static_cast<octomap::key_type>(lo[1] + kTileCells - 1),
+                              static_cast<octomap::key_type>(lo[2] + kTileCells - 1));
+  for (auto it = tree_->begin_leafs_bbx(lo, hi), end = tree_->end_leafs_bbx(); it != end; ++it) {
+    Leaf leaf;
+    // A leaf coarser than the tile gives the tile's part of it.
+    leaf.key = it.getDepth() < kTileDepth ? lo : it.getKey();
+    leaf.depth = static_cast<uint8_t>(std::max(it.getDepth(), kTileDepth));
+    leaf.log_odds = it->getLogOdds();
+    leaves.push_back(leaf);
+  }
+  return leaves;
+}
+
+size_t MapAccumulator::dropTile(const TileIndex& tile) {
+  if (!tileInKeyRange(tile)) return 0;
+  const int offset = static_cast<int>(tree_->coordToKey(0.0));
+  const octomap::OcTreeKey lo = tileFirstKey(tile, offset);
+  const octomap::OcTreeKey hi(static_cast<octomap::key_type>(lo[0] + kTileCells - 1),
+                              static_cast<octomap::key_type>(lo[1] + kTileCells - 1),
+                              static_cast<octomap::key_type>(lo[2] + kTileCells - 1));
+  size_t leaves = 0;
+  for (auto it = tree_->begin_leafs_bbx(lo, hi), end = tree_->end_leafs_bbx(); it != end; ++it) {
+    ++leaves;
+    if (!all_changed_) insertBlocksOf(it.getKey(), it.getDepth(), &changed_blocks_);
+  }
+  if (leaves == 0) return 0;
+  tree_->dropNode(lo, kTileDepth);
+  inner_stale_ = true;
+  dirty_tiles_.erase(packBlock(tile));
+  return leaves;
+}
+
+void MapAccumulator::insertLeaves(const std::vector<Leaf>& leaves) {
+  const float lo = tree_->getClampingThresMinLog(), hi = tree_->getClampingThresMaxLog();
+  for (const Leaf& leaf : leaves) tree_->setLeaf(leaf.key, leaf.depth, std::clamp(leaf.log_odds, lo, hi));
+  if (leaves.empty()) return;
+  inner_stale_ = true;
+  if (all_changed_) return;
+  for (const Leaf& leaf : leaves) insertBlocksOf(leaf.key, leaf.depth, &changed_blocks_);
+}
+
+std::vector<MapAccumulator::TileIndex> MapAccumulator::takeDirtyTiles() {
+  std::vector<TileIndex> tiles;
+  if (all_dirty_) {
+    tiles = this->tiles();
+  } else {
+    for (uint64_t p : dirty_tiles_) tiles.push_back(unpackBlock(p));
+  }
+  dirty_tiles_.clear();
+  all_dirty_ = false;
+  return tiles;
 }
 
 }  // namespace stereo_occupancy

@@ -9,9 +9,11 @@
 #include <ros/ros.h>
 #include <std_srvs/Empty.h>
 #include <std_srvs/Trigger.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <chrono>
+#include <stdexcept>
 #include <cstdio>
 #include <memory>
 #include <mutex>
@@ -52,7 +54,10 @@ class OctomapAccumulator : public nodelet::Nodelet {
   std_msgs::Header mapHeader() const;  ///< requires mutex_
   bool reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
-  std::vector<std::string> save();  ///< requires mutex_
+  /// Writes the whole map's files; @p lock (on mutex_) is let go while the database's tiles are written.
+  std::vector<std::string> save(std::unique_lock<std::mutex>& lock);
+  /// Opens <save_dir>/<map_name>.db; on failure logs why and maps without it.
+  void openDatabase();
 
   OctomapAccumulatorParameters params_;
 
@@ -65,6 +70,7 @@ class OctomapAccumulator : public nodelet::Nodelet {
   std::vector<double> fusion_ms_;  ///< per update, for the summary at shutdown (bounded)
   std::vector<double> window_fusion_ms_;  ///< per update since the last diagnostics report
   std::string last_problem_;
+  std::string database_problem_;  ///< why the database could not be opened; empty if it was
   bool changed_since_publish_ = true;
 
   ros::Subscriber update_sub_;
@@ -99,6 +105,8 @@ void OctomapAccumulator::onInit() {
                  static_cast<unsigned long>(fusion_->map().tree().getNumLeafNodes()));
   }
 
+  if (!params_.save_dir.empty()) openDatabase();
+
   // octomap_server's names and types, latched as there.
   octomap_pub_ = nh.advertise<Octomap>("octomap_binary", 1, /*latch=*/true);
   octomap_full_pub_ = nh.advertise<Octomap>("octomap_full", 1, /*latch=*/true);
@@ -130,12 +138,18 @@ void OctomapAccumulator::onInit() {
   reset_srv_ = pnh.advertiseService("reset", &OctomapAccumulator::reset, this);
   publish_timer_ = nh.createTimer(ros::Duration(1.0 / params_.publish_rate_hz), &OctomapAccumulator::publish, this);
   if (params_.save_period_s > 0.0 && !params_.save_dir.empty()) {
-    // Periodic saves, so that a crash loses at most save_period_s of mapping.
+    // Periodic checkpoints, so that a crash loses at most save_period_s of
+    // mapping: the changed tiles to the database (its thread writes them),
+    // or without one the whole map to its files.
     save_timer_ = nh.createWallTimer(ros::WallDuration(params_.save_period_s), [this](const ros::WallTimerEvent&) {
-      std::lock_guard<std::mutex> lock(mutex_);
+      std::unique_lock<std::mutex> lock(mutex_);
+      if (fusion_->mission().store()) {
+        fusion_->mission().checkpoint();
+        return;
+      }
       if (fusion_->map().updates() == updates_at_last_save_) return;
       try {
-        save();
+        save(lock);
       } catch (const std::exception& e) {
         ++saves_failed_;
         last_save_failed_ = true;
@@ -150,14 +164,16 @@ void OctomapAccumulator::onInit() {
   diagnostics_->add("accumulator", this, &OctomapAccumulator::diagnose);
   diagnostics_timer_ = nh.createTimer(ros::Duration(1.0), [this](const ros::TimerEvent&) { diagnostics_->update(); });
 
-  NODELET_INFO("OctomapAccumulator: %.3g m cells in frame '%s', map kept within %.0f m of the vehicle, saving to '%s'",
+  const auto& store = fusion_->mission().store();
+  NODELET_INFO("OctomapAccumulator: %.3g m cells in frame '%s', live map within %.0f m of the vehicle, beyond it %s, "
+               "saving to '%s'",
                params_.map.resolution_m, params_.world_frame.empty() ? "(the first update's)" : params_.world_frame.c_str(),
-               params_.map.max_extent_m,
+               params_.map.max_extent_m, store ? ("kept in " + store->path()).c_str() : "dropped",
                params_.save_dir.empty() ? "(nowhere)" : params_.save_dir.c_str());
 }
 
 OctomapAccumulator::~OctomapAccumulator() {
-  std::lock_guard<std::mutex> lock(mutex_);
+  std::unique_lock<std::mutex> lock(mutex_);
   if (!fusion_ms_.empty()) {
     // One line for scripts, on stderr (rosconsole may be gone at shutdown).
     const TimeStatistics fusion = TimeStatistics::of(fusion_ms_);
@@ -173,7 +189,7 @@ OctomapAccumulator::~OctomapAccumulator() {
   if (fusion_->map().updates() == 0) return;
   try {
     // On stderr: rosconsole may be gone at shutdown.
-    for (const auto& path : save())
+    for (const auto& path : save(lock))
       std::fprintf(stderr, "OctomapAccumulator: saved the map of %lu updates to %s on shutdown\n",
                    static_cast<unsigned long>(fusion_->map().updates()), path.c_str());
   } catch (const std::exception& e) {
@@ -319,10 +335,45 @@ bool OctomapAccumulator::clearBox(BoundingBoxQuery::Request& request, BoundingBo
   return true;
 }
 
-std::vector<std::string> OctomapAccumulator::save() {
-  auto paths = fusion_->map().save(params_.save_dir, params_.map_name);
+void OctomapAccumulator::openDatabase() {
+  const std::string path = params_.save_dir + "/" + params_.map_name + ".db";
+  ::mkdir(params_.save_dir.c_str(), 0755);  // one level, if missing; any other problem shows in the open
+  try {
+    fusion_->openDatabase(path);
+  } catch (const std::exception& e) {
+    // The live map works without it; what leaves max_extent_m is then lost.
+    database_problem_ = e.what();
+    NODELET_ERROR("%s; mapping goes on without it: cells beyond max_extent_m are dropped and ~save_map writes "
+                  "only the live map", e.what());
+    return;
+  }
+  const size_t tiles = fusion_->mission().store()->tiles().size();
+  NODELET_INFO("the mission's tiles are kept in %s (%s, %zu tiles)", path.c_str(), tiles ? "continued" : "new", tiles);
+}
+
+std::vector<std::string> OctomapAccumulator::save(std::unique_lock<std::mutex>& lock) {
+  std::shared_ptr<TileStore> store = fusion_->mission().store();
+  std::vector<std::string> paths;
+  if (store) {
+    // The whole mission: the changed tiles to the database, then all its
+    // tiles to the files, outside the lock (the fusion goes on meanwhile).
+    fusion_->mission().checkpoint();
+    const size_t updates = fusion_->map().updates();
+    lock.unlock();
+    std::string error;
+    try {
+      paths = MissionMap::saveStore(*store, params_.save_dir, params_.map_name);
+    } catch (const std::exception& e) {
+      error = e.what();
+    }
+    lock.lock();
+    if (!error.empty()) throw std::runtime_error(error);
+    updates_at_last_save_ = updates;
+  } else {
+    paths = fusion_->map().save(params_.save_dir, params_.map_name);
+    updates_at_last_save_ = fusion_->map().updates();
+  }
   last_save_failed_ = false;
-  updates_at_last_save_ = fusion_->map().updates();
   return paths;
 }
 
@@ -332,9 +383,9 @@ bool OctomapAccumulator::saveMap(std_srvs::Trigger::Request&, std_srvs::Trigger:
     response.message = "save_dir is not set";
     return true;
   }
-  std::lock_guard<std::mutex> lock(mutex_);
+  std::unique_lock<std::mutex> lock(mutex_);
   try {
-    const auto paths = save();
+    const auto paths = save(lock);
     response.success = true;
     response.message = paths[0] + " " + paths[1];
     NODELET_INFO("saved the map: %s", response.message.c_str());
@@ -373,6 +424,18 @@ void OctomapAccumulator::diagnose(diagnostic_updater::DiagnosticStatusWrapper& s
   status.add("saves failed", saves_failed_);
   status.add("leaves", fusion_->map().tree().getNumLeafNodes());
   status.add("leaves pruned (max_extent_m)", n.leaves_pruned);
+  if (const auto& store = fusion_->mission().store()) {
+    const TileStoreStatus db = store->status();
+    status.add("database", store->path());
+    status.add("tiles moved to the database", n.tiles_stored);
+    status.add("tiles written", db.tiles_written);
+    status.add("tiles waiting to be written", db.queued);
+    status.add("database writes failed", db.writes_failed);
+    if (db.queued > 0 && !db.last_error.empty())
+      status.mergeSummary(diagnostic_msgs::DiagnosticStatus::ERROR, "database: " + db.last_error);
+  } else if (!database_problem_.empty()) {
+    status.mergeSummary(diagnostic_msgs::DiagnosticStatus::ERROR, "no database: " + database_problem_);
+  }
   status.add("last fusion time [ms]", last_fusion_ms_);
   status.add("max fusion time [ms]", max_fusion_ms_);
   // Since the last report (1 s): what a soak plots over time.

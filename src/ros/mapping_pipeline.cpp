@@ -158,7 +158,11 @@ DisparityDrawer* FrameMapping::drawerFor(const StereoCameraConfig& camera, Frame
 }
 
 MapFusion::MapFusion(const OctomapAccumulatorParameters& params)
-    : params_(params), map_(params.map), frame_id_(params.world_frame) {}
+    : params_(params), mission_(params.map), frame_id_(params.world_frame) {}
+
+void MapFusion::openDatabase(const std::string& path) {
+  mission_.attachStore(std::make_shared<TileStore>(path, params_.map.resolution_m));
+}
 
 bool MapFusion::refuse(const std::string& text, std::string* why) {
   ++counters_.refused;
@@ -173,13 +177,15 @@ bool MapFusion::fuse(const OccupancyUpdate& msg, std::string* why, const std::st
     return refuse("frame '" + msg.header.frame_id + "', the map is in '" + frame_id_ + "'", why);
   GridUpdateView update;
   std::string reason;
-  if (!viewOf(msg, &update, &reason) || !map_.integrate(update, &reason)) return refuse(reason, why);
+  if (!viewOf(msg, &update, &reason) || !mission_.integrate(update, &reason)) return refuse(reason, why);
   if (frame_id_.empty()) frame_id_ = msg.header.frame_id;  // world_frame "": the first update's, from then on
   last_stamp_ = msg.header.stamp;
   // Pruning follows the updates' time, so that a replay prunes where the flight did.
   if (last_prune_.isZero() || last_stamp_ < last_prune_) last_prune_ = last_stamp_;
   if ((last_stamp_ - last_prune_).toSec() > params_.prune_period_s) {
-    counters_.leaves_pruned += map_.prune();
+    const MaintainResult kept = mission_.maintain();
+    counters_.leaves_pruned += kept.leaves_dropped;
+    counters_.tiles_stored += kept.tiles_stored;
     last_prune_ = last_stamp_;
   }
   return true;
@@ -195,6 +201,6 @@ void MapFusion::countLost(const OccupancyUpdate& msg, const std::string& publish
   last = sequence;
 }
 
-void MapFusion::reset() { map_.reset(); }
+void MapFusion::reset() { mission_.reset(); }
 
 }  // namespace stereo_occupancy

@@ -11,6 +11,7 @@
 #include <tf2_msgs/TFMessage.h>
 
 #include <chrono>
+#include <cstdio>
 #include <deque>
 #include <iostream>
 #include <map>
@@ -115,6 +116,10 @@ int main(int argc, char** argv) {
     tf2::BufferCore tf(ros::Duration(3600.0));
     so::FrameMapping mapping(mapper);
     so::MapFusion fusion(accumulator);
+    // The whole flight, as the accumulator keeps it: tiles beyond
+    // max_extent_m go to PREFIX.db, a new one for each run.
+    for (const char* suffix : {".db", ".db-wal", ".db-shm"}) std::remove((prefix + suffix).c_str());
+    fusion.openDatabase(prefix + ".db");
     sensor_msgs::CameraInfoConstPtr info;
     std::deque<PendingImage> pending;
     size_t read = 0, unread = 0, queue_dropped = 0, fusion_refused = 0;
@@ -201,7 +206,7 @@ int main(int argc, char** argv) {
     const auto slash = prefix.find_last_of('/');
     const std::string dir = slash == std::string::npos ? "." : prefix.substr(0, slash);
     const std::string name = slash == std::string::npos ? prefix : prefix.substr(slash + 1);
-    const auto paths = fusion.map().save(dir, name);
+    const auto paths = fusion.mission().saveWhole(dir, name);
     const double total_s = std::chrono::duration<double>(Clock::now() - start).count();
     const so::FrameCounters& n = mapping.counters();
     const double mapped = static_cast<double>(std::max<uint64_t>(n.mapped, 1));

@@ -204,3 +204,17 @@ TEST(ToolErrors, BagToMapSkipsHostileImages) {
     EXPECT_NE(r.err.find(reason), std::string::npos) << reason << "\n" << r.err;
   std::remove(bag_path.c_str());
 }
+
+TEST(ToolErrors, ExportMap) {
+  const std::string tool = EXPORT_MAP_EXE;
+  writeFile(kTmp + "not_tiles.db", "this is not a database, only text that is long enough to be read as one\n");
+  expectError("export_map",
+              {tool, tool + " --database x.db", tool + " --database x.db --out y.txt",
+               tool + " --database x.db --out y.bt --min 0 0 0", tool + " --database x.db --out y.bt --min 1 1 1 --max 0 0 0",
+               tool + " --database x.db --out y.bt --min a b c --max 1 1 1", tool + " --frobnicate"},
+              2);
+  expectError("export_map",
+              {tool + " --database /nonexistent/m.db --out " + kTmp + "e.bt",
+               tool + " --database " + kTmp + "not_tiles.db --out " + kTmp + "e.bt"},
+              1);
+}

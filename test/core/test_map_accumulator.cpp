@@ -20,6 +20,7 @@
 #include <thread>
 
 #include "octree_text.h"
+#include "single_cell.h"
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
@@ -29,15 +30,6 @@
 using namespace stereo_occupancy;
 
 namespace {
-/// An update of one cell, seen from the cell's centre.
-GridUpdate singleCell(const Eigen::Vector3i& g, float value, double res = 0.25) {
-  LocalGrid grid;
-  grid.reset(g, Eigen::Vector3i(1, 1, 1), res);
-  grid.at(0, 0, 0) = value;
-  GridUpdate u;
-  encodeGridUpdate(grid, grid.cellCentre(0, 0, 0), &u);
-  return u;
-}
 double logit(double p) { return std::log(p / (1.0 - p)); }
 
 /// Integrates the Table I image, drawn with @p algorithm, into @p map.

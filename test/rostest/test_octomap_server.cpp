@@ -18,6 +18,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <memory>
 #include <map>
 #include <mutex>
@@ -31,6 +32,7 @@
 #include "stereo_occupancy/Octomap.h"
 #include "stereo_occupancy/ros/conversions.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
+#include "stereo_occupancy/store/mission_map.h"
 #include "wait_for.h"
 
 using namespace stereo_occupancy;
@@ -50,6 +52,22 @@ int cellAt(const nav_msgs::OccupancyGrid& grid, double x, double y) {
   const int j = static_cast<int>(std::floor((y - grid.info.origin.position.y) / grid.info.resolution));
   if (i < 0 || j < 0 || i >= static_cast<int>(grid.info.width) || j >= static_cast<int>(grid.info.height)) return -2;
   return grid.data[static_cast<size_t>(j) * grid.info.width + i];
+}
+
+/// A request to load a second OctomapAccumulator as @p name, its map outputs
+/// (and the update input, if @p own_input) under @p name.
+nodelet::NodeletLoad accumulatorLoad(const std::string& name, bool own_input) {
+  nodelet::NodeletLoad load;
+  load.request.name = name;
+  load.request.type = "stereo_occupancy/OctomapAccumulator";
+  std::vector<std::string> topics = {"octomap_binary", "octomap_full", "occupied_cells_vis_array",
+                                     "free_cells_vis_array", "octomap_point_cloud_centers", "projected_map"};
+  if (own_input) topics.push_back("occupancy_update");
+  for (const std::string& topic : topics) {
+    load.request.remap_source_args.push_back("/" + topic);
+    load.request.remap_target_args.push_back(name + "/" + topic);
+  }
+  return load;
 }
 
 class OctomapServerTest : public ::testing::Test {
@@ -257,14 +275,7 @@ TEST_F(OctomapServerTest, AnAccumulatorStartsFromASavedMap) {
     std::lock_guard<std::mutex> lock(mutex_);
     restored = msg;
   });
-  nodelet::NodeletLoad load;
-  load.request.name = "/restored";
-  load.request.type = "stereo_occupancy/OctomapAccumulator";
-  for (const char* topic : {"occupancy_update", "octomap_binary", "octomap_full", "occupied_cells_vis_array",
-                            "free_cells_vis_array", "octomap_point_cloud_centers", "projected_map"}) {
-    load.request.remap_source_args.push_back(std::string("/") + topic);
-    load.request.remap_target_args.push_back(std::string("/restored/") + topic);
-  }
+  nodelet::NodeletLoad load = accumulatorLoad("/restored", /*own_input=*/true);
   ASSERT_TRUE(ros::service::call("/stereo_occupancy_manager/load_nodelet", load));
   ASSERT_TRUE(load.response.success);
   ASSERT_TRUE(waitFor(mutex_, [&] { return restored != nullptr; }, 20.0)) << "the restored map was not published";
@@ -277,5 +288,59 @@ TEST_F(OctomapServerTest, AnAccumulatorStartsFromASavedMap) {
   }
   nodelet::NodeletUnload unload;
   unload.request.name = "/restored";
+  EXPECT_TRUE(ros::service::call("/stereo_occupancy_manager/unload_nodelet", unload));
+}
+
+// The mission's database: an accumulator with a save_dir keeps its tiles in
+// <save_dir>/<map_name>.db; unloaded and loaded again it continues from it,
+// and ~save_map writes the whole mission before any new update comes.
+TEST_F(OctomapServerTest, ARestartedAccumulatorContinuesFromItsDatabase) {
+  const std::string dir = "/tmp/stereo_occupancy_mission_db";
+  ::mkdir(dir.c_str(), 0755);
+  for (const char* f : {"/m.db", "/m.db-wal", "/m.db-shm", "/m.bt", "/m.ot"}) std::remove((dir + f).c_str());
+  nh_.setParam("/mission/save_dir", dir);
+  nh_.setParam("/mission/map_name", "m");
+  nh_.setParam("/mission/world_frame", "map");
+  OctomapConstPtr mission_map;
+  ros::Subscriber sub = nh_.subscribe<Octomap>("/mission/octomap_binary", 1, [&](const OctomapConstPtr& msg) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    mission_map = msg;
+  });
+  nodelet::NodeletLoad load = accumulatorLoad("/mission", /*own_input=*/false);  // the updates of the main one
+  nodelet::NodeletUnload unload;
+  unload.request.name = "/mission";
+  ASSERT_TRUE(ros::service::call("/stereo_occupancy_manager/load_nodelet", load));
+  ASSERT_TRUE(load.response.success);
+  ASSERT_TRUE(ros::service::waitForService("/mission/save_map", ros::Duration(10.0)));
+  mapTheWall();  // both accumulators take the updates
+  ASSERT_TRUE(waitFor(mutex_, [&] {
+    if (!mission_map) return false;
+    const auto tree = treeOf(*mission_map);
+    const octomap::OcTreeNode* n = tree->search(12.1, 0.1, 2.1);
+    return n && tree->isNodeOccupied(n);
+  }, 20.0)) << "the wall never reached the mission's map";
+  ASSERT_TRUE(ros::service::call("/stereo_occupancy_manager/unload_nodelet", unload));  // closes the database
+
+  {
+    TileStore store(dir + "/m.db", 0.0);  // the accumulator let the file go
+    EXPECT_GE(store.tiles().size(), 1u);
+    const auto whole = MissionMap::assemble(store, Eigen::AlignedBox3d());
+    const octomap::OcTreeNode* n = whole->search(12.1, 0.1, 2.1);
+    ASSERT_NE(n, nullptr) << "the database does not hold the wall";
+    EXPECT_TRUE(whole->isNodeOccupied(n));
+  }
+  std::remove((dir + "/m.bt").c_str());
+  std::remove((dir + "/m.ot").c_str());
+  ASSERT_TRUE(ros::service::call("/stereo_occupancy_manager/load_nodelet", load));  // a restart
+  ASSERT_TRUE(load.response.success);
+  ASSERT_TRUE(ros::service::waitForService("/mission/save_map", ros::Duration(10.0)));
+  std_srvs::Trigger save;
+  ASSERT_TRUE(ros::service::call("/mission/save_map", save));
+  ASSERT_TRUE(save.response.success) << save.response.message;
+  octomap::OcTree saved(0.25);
+  ASSERT_TRUE(saved.readBinary(dir + "/m.bt"));
+  const octomap::OcTreeNode* n = saved.search(12.1, 0.1, 2.1);
+  ASSERT_NE(n, nullptr) << "the restarted accumulator's save lacks the wall of its database";
+  EXPECT_TRUE(saved.isNodeOccupied(n));
   EXPECT_TRUE(ros::service::call("/stereo_occupancy_manager/unload_nodelet", unload));
 }

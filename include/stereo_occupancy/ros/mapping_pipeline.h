@@ -23,6 +23,7 @@
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/map_accumulator.h"
 #include "stereo_occupancy/ros/parameters.h"
+#include "stereo_occupancy/store/mission_map.h"
 
 namespace stereo_occupancy {
 
@@ -109,7 +110,8 @@ class FrameMapping {
 struct FusionCounters {
   uint64_t received = 0;
   uint64_t refused = 0;
-  uint64_t leaves_pruned = 0;
+  uint64_t leaves_pruned = 0;  ///< dropped for good beyond max_extent_m (no database)
+  uint64_t tiles_stored = 0;   ///< moved to the database beyond max_extent_m
   /// Updates that never arrived: gaps in their publishers' sequence numbers
   /// (a queue that overflowed while the accumulator was busy, a lossy link).
   uint64_t lost = 0;
@@ -123,22 +125,32 @@ class MapFusion {
 
   /// Fuses @p msg if it is in the map's frame and MapAccumulator::admits()
   /// it; otherwise false, the map unchanged, and why. Every prune_period_s of
-  /// update stamps, drops what lies beyond max_extent_m (MapAccumulator::prune).
-  /// Counts the updates of @p publisher's msg.source lost before this one
-  /// (the gaps in their sequence numbers).
+  /// update stamps, moves what lies beyond max_extent_m to the database, or
+  /// without one drops it (MissionMap::maintain). Counts the updates of
+  /// @p publisher's msg.source lost before this one (the gaps in their
+  /// sequence numbers).
   bool fuse(const OccupancyUpdate& msg, std::string* why, const std::string& publisher = "");
 
-  const MapAccumulator& map() const { return map_; }
-  /// Empties the map (the frame stays).
+  /// Keeps the mission's tiles in the SQLite database at @p path (TileStore):
+  /// created if missing, continued if there.
+  /// @throws std::runtime_error (locked, unreadable, another resolution); the map then works without one.
+  void openDatabase(const std::string& path);
+  /// The live map (around the vehicle).
+  const MapAccumulator& map() const { return mission_.live(); }
+  /// The live map and the database.
+  MissionMap& mission() { return mission_; }
+  /// Empties the map and the database (the frame stays).
   void reset();
   /// Starts over from the map in @p path (MapAccumulator::load).
   /// @throws std::runtime_error; the map is then unchanged.
-  void load(const std::string& path) { map_.load(path); }
+  void load(const std::string& path) { mission_.load(path); }
   /// MapAccumulator::takeChangedBlocks() and markAllChanged(): what the outputs must send again.
-  std::vector<MapAccumulator::BlockIndex> takeChangedBlocks(bool* all) { return map_.takeChangedBlocks(all); }
-  void markAllChanged() { map_.markAllChanged(); }
+  std::vector<MapAccumulator::BlockIndex> takeChangedBlocks(bool* all) { return mission_.live().takeChangedBlocks(all); }
+  void markAllChanged() { mission_.live().markAllChanged(); }
   /// Leaves no occupied cell in the box (MapAccumulator::clearBox); returns how many were cleared.
-  size_t clearBox(const Eigen::Vector3d& W_min, const Eigen::Vector3d& W_max) { return map_.clearBox(W_min, W_max); }
+  size_t clearBox(const Eigen::Vector3d& W_min, const Eigen::Vector3d& W_max) {
+    return mission_.live().clearBox(W_min, W_max);
+  }
   /// The map's frame: world_frame, or (world_frame "") the first fused update's; "" before it.
   const std::string& frameId() const { return frame_id_; }
   /// The stamp of the last fused update.
@@ -150,7 +162,7 @@ class MapFusion {
   void countLost(const OccupancyUpdate& msg, const std::string& publisher);
 
   OctomapAccumulatorParameters params_;
-  MapAccumulator map_;
+  MissionMap mission_;
   std::string frame_id_;
   ros::Time last_stamp_;
   ros::Time last_prune_;  ///< stamp of the update at the last prune

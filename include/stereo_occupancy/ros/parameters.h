@@ -65,10 +65,13 @@ struct OctomapAccumulatorParameters {
   std::string world_frame = "map";
   MapAccumulatorConfig map;
   double publish_rate_hz = 1.0;  ///< rate of the map outputs, while subscribed [Hz]
-  double prune_period_s = 5.0;   ///< how often cells beyond max_extent_m are dropped [s]
-  std::string save_dir;          ///< where ~save_map writes (and the map is saved on shutdown); empty: nowhere
+  double prune_period_s = 5.0;   ///< how often cells beyond max_extent_m go to the database (or are dropped) [s]
+  /// Where ~save_map writes and the map is saved on shutdown, and where the
+  /// mission's database <map_name>.db lives; empty: nowhere (and cells beyond max_extent_m are dropped).
+  std::string save_dir;
   std::string map_name = "stereo_occupancy_map";  ///< file base name in save_dir
-  double save_period_s = 0.0;    ///< also save every this many seconds when the map changed; 0: only on request/shutdown
+  /// Checkpoint this often: changed tiles to the database (or, without one, the map to its files); 0: never [s].
+  double save_period_s = 5.0;
   std::string map_file;  ///< a .bt or .ot to start from (octomap_server's map_file); empty: an empty map
   /// The height band of projected_map (octomap_server's occupancy_min_z / occupancy_max_z) [m].
   double projection_min_z_m = -10000.0;
@@ -83,12 +86,13 @@ struct OctomapAccumulatorParameters {
     MapAccumulatorConfig::forEachParameter(p.map, f);
     f(numberParameter("publish_rate_hz", "Hz", 0.01, 100.0, "rate of the map outputs, while subscribed"),
       p.publish_rate_hz);
-    f(numberParameter("prune_period_s", "s", 0.1, 86400.0, "how often cells beyond max_extent_m are dropped"),
+    f(numberParameter("prune_period_s", "s", 0.1, 86400.0,
+                      "how often cells beyond max_extent_m go to the database, or are dropped without one"),
       p.prune_period_s);
-    f(textParameter("save_dir", "where ~save_map writes, and the map is saved on shutdown; empty: nowhere"),
+    f(textParameter("save_dir", "~save_map, the shutdown save and the mission's database <map_name>.db; empty: nowhere"),
       p.save_dir);
     f(textParameter("map_name", "file base name in save_dir: a plain name"), p.map_name);
-    f(numberParameter("save_period_s", "s", 0.0, 86400.0, "also save this often while the map changes; 0: never"),
+    f(numberParameter("save_period_s", "s", 0.0, 86400.0, "checkpoint the changed tiles to the database this often; 0: never"),
       p.save_period_s);
     f(textParameter("map_file", "a .bt or .ot to start from; empty: an empty map"), p.map_file);
     f(numberParameter("projection_min_z_m", "m", -10000.0, 10000.0, "lowest height projected_map sees"),

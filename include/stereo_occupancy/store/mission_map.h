@@ -1,0 +1,84 @@
+#pragma once
+/// @file
+/// The whole mission's map: the live MapAccumulator, a window around the
+/// vehicle in RAM, and the tiles it flew away from in a TileStore on disk,
+/// which come back when the vehicle returns.
+
+#include <memory>
+#include <string>
+#include <unordered_set>
+#include <vector>
+
+#include "stereo_occupancy/map_accumulator.h"
+#include "stereo_occupancy/store/tile_store.h"
+
+namespace stereo_occupancy {
+
+/// What MissionMap::maintain() did.
+struct MaintainResult {
+  size_t leaves_dropped = 0;  ///< gone for good (no store): MapAccumulator::prune
+  size_t tiles_stored = 0;    ///< moved from RAM to the store
+};
+
+/// MapAccumulator + TileStore. Not thread-safe, as MapAccumulator; the
+/// store it hands tiles to is.
+class MissionMap {
+ public:
+  using TileIndex = MapAccumulator::TileIndex;
+
+  /// @throws std::invalid_argument if the config is not valid.
+  explicit MissionMap(const MapAccumulatorConfig& config);
+
+  /// From now on, tiles beyond max_extent_m go to @p store instead of being
+  /// dropped, and come back from it when an update reaches them. Tiles the
+  /// live map holds now replace the store's on the next checkpoint().
+  /// @throws std::invalid_argument for a store of another resolution.
+  void attachStore(std::shared_ptr<TileStore> store);
+  /// The store, or null.
+  const std::shared_ptr<TileStore>& store() const { return store_; }
+
+  /// The live map (the window around the vehicle).
+  const MapAccumulator& live() const { return live_; }
+  MapAccumulator& live() { return live_; }
+
+  /// MapAccumulator::integrate, after taking back from the store the tiles
+  /// the update reaches.
+  bool integrate(const GridUpdateView& update, std::string* why = nullptr);
+  /// Moves the tiles outside the window (MapAccumulator::keptBox, grown by
+  /// kPruneSlack · max_extent_m) to the store; without one, prunes.
+  MaintainResult maintain();
+  /// Queues the live tiles changed since the last checkpoint in the store
+  /// (its thread writes them): a crash then loses only what came after.
+  /// Returns how many tiles were queued; 0 without a store.
+  size_t checkpoint();
+  /// Empties the map, the store's tiles too.
+  void reset();
+  /// MapAccumulator::load; the loaded tiles replace the store's at the next checkpoint().
+  void load(const std::string& path);
+
+  /// The whole mission: checkpoint(), then every tile of the store; without
+  /// a store, the live map. Writes <directory>/<base_name>.bt and .ot as
+  /// MapAccumulator::save does. @throws std::runtime_error as it does, and
+  /// if the store cannot write its queue.
+  std::vector<std::string> saveWhole(const std::string& directory, const std::string& base_name);
+  /// saveWhole()'s second half, which needs no MissionMap (a caller can run
+  /// it outside the lock that serialises the map): flushes @p store, then
+  /// writes all its tiles.
+  static std::vector<std::string> saveStore(TileStore& store, const std::string& directory,
+                                            const std::string& base_name);
+
+  /// The store's tiles that overlap [W_min, W_max], cut to it, as one tree
+  /// (the whole store for an empty box). @throws std::runtime_error for an unreadable row.
+  static std::unique_ptr<octomap::OcTree> assemble(const TileStore& store, const Eigen::AlignedBox3d& W_box);
+
+ private:
+  /// Takes @p tile back from the store unless the live map holds it.
+  void makeResident(const TileIndex& tile);
+
+  MapAccumulator live_;
+  std::shared_ptr<TileStore> store_;
+  std::unordered_set<uint64_t> resident_;  ///< tiles the live map holds (not the store's copy)
+  std::unordered_set<uint64_t> unsaved_;   ///< resident tiles changed since their last checkpoint
+};
+
+}  // namespace stereo_occupancy

@@ -1,0 +1,101 @@
+#pragma once
+/// @file
+/// The mission's tiles on disk: an SQLite database (as RTAB-Map keeps its
+/// maps), one row per tile, each row an OctoMap .ot stream of the tile's
+/// leaves. Writes happen on the store's own thread, so the fusion never
+/// waits for the disk.
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <unordered_set>
+#include <vector>
+
+#include "stereo_occupancy/map_accumulator.h"
+
+struct sqlite3;
+
+namespace stereo_occupancy {
+
+/// What a TileStore has done.
+struct TileStoreStatus {
+  uint64_t tiles_written = 0;  ///< tile rows committed since the store opened
+  uint64_t writes_failed = 0;  ///< batches that could not be committed (retried)
+  size_t queued = 0;           ///< tiles waiting to be written
+  std::string last_error;      ///< the last failure's reason; empty if none
+};
+
+/// A database of map tiles (MapAccumulator::TileIndex -> leaves). Thread-safe.
+class TileStore {
+ public:
+  using TileIndex = MapAccumulator::TileIndex;
+  using Leaf = MapAccumulator::Leaf;
+
+  /// Opens or creates the database at @p path for maps of @p resolution_m
+  /// cells (0: an existing database's) and locks it for this process.
+  /// @throws std::runtime_error naming the file and the reason: it cannot be
+  /// created or read, another process has it open ("locked"), it is not a
+  /// tile database, or its tiles have another resolution.
+  TileStore(const std::string& path, double resolution_m);
+  /// Writes what is queued (a failure goes to stderr), then closes.
+  ~TileStore();
+  TileStore(const TileStore&) = delete;
+  TileStore& operator=(const TileStore&) = delete;
+
+  /// @p tile packed into 64 bits (16 per axis), and back: the key of sets and maps of tiles.
+  static uint64_t pack(const TileIndex& tile);
+  static TileIndex unpack(uint64_t key);
+
+  const std::string& path() const { return path_; }
+  double resolution() const { return resolution_m_; }
+
+  /// Queues @p leaves as @p tile's whole content (none: the tile is deleted).
+  /// The store's thread writes it; until then get() returns it from memory.
+  void put(const TileIndex& tile, std::vector<Leaf> leaves);
+  /// @p tile's content, queued or stored; false if the store has none.
+  /// @throws std::runtime_error if the row cannot be read.
+  bool get(const TileIndex& tile, std::vector<Leaf>* leaves) const;
+  /// True if get() would find @p tile. Costs no disk access.
+  bool contains(const TileIndex& tile) const;
+  /// Every tile the store has (queued or stored).
+  std::vector<TileIndex> tiles() const;
+  /// Waits until everything queued is committed, or a write fails: then false.
+  bool flush();
+  /// Deletes every tile (queued ones too).
+  void clear();
+  TileStoreStatus status() const;
+
+ private:
+  struct Queued {
+    TileIndex tile;
+    std::shared_ptr<const std::vector<Leaf>> leaves;
+    uint64_t version = 0;
+  };
+  void writerLoop();
+  /// Commits @p batch in one transaction unless clear() came after it was
+  /// taken (at @p generation); false with the reason in @p error.
+  bool write(const std::vector<Queued>& batch, uint64_t generation, std::string* error);
+  void execute(const char* sql);  ///< @throws std::runtime_error; requires db_mutex_
+
+  std::string path_;
+  double resolution_m_;
+  mutable std::mutex db_mutex_;  ///< the connection's; taken after mutex_ if both
+  sqlite3* db_ = nullptr;
+
+  mutable std::mutex mutex_;  ///< guards everything below
+  std::condition_variable wake_writer_, written_;
+  std::map<uint64_t, Queued> queue_;    ///< by packed tile index
+  std::unordered_set<uint64_t> stored_;  ///< tiles with a row
+  uint64_t next_version_ = 1;
+  std::atomic<uint64_t> generation_{0};  ///< clear() counts it up, under both locks
+  bool writing_ = false, stop_ = false;
+  TileStoreStatus status_;
+  std::thread writer_;
+};
+
+}  // namespace stereo_occupancy

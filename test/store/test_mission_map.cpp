@@ -1,0 +1,246 @@
+#include <gtest/gtest.h>
+
+#include <octomap/OcTree.h>
+
+#include <signal.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include "../core/octree_text.h"
+#include "../core/single_cell.h"
+#include "stereo_occupancy/accumulating_octree.h"
+#include "stereo_occupancy/grid_update.h"
+#include "stereo_occupancy/store/mission_map.h"
+#include "stereo_occupancy/store/tile_store.h"
+
+using namespace stereo_occupancy;
+
+namespace {
+constexpr double kRes = 0.25;
+
+/// A fresh database path (the file and its WAL removed).
+std::string freshDatabase(const std::string& name) {
+  const std::string path = ::testing::TempDir() + "/" + name + ".db";
+  for (const char* suffix : {"", "-wal", "-shm", "-journal"}) std::remove((path + suffix).c_str());
+  return path;
+}
+
+/// Cells with positive log-odds in @p tree.
+size_t occupiedLeaves(const octomap::OcTree& tree) {
+  size_t n = 0;
+  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) n += it->getLogOdds() > 0.0f;
+  return n;
+}
+}  // namespace
+
+// Dropping a node deletes its subtree and the ancestors it leaves empty: the
+// rest of the tree is node for node what it would be without it, and the
+// tree's node count stays right.
+TEST(AccumulatingOcTree, DropNodeLeavesTheRestAsIfItNeverWas) {
+  AccumulatingOcTree tree(kRes), without(kRes);
+  const int offset = static_cast<int>(tree.coordToKey(0.0));
+  for (int i = 0; i < 300; ++i) {
+    const octomap::OcTreeKey near(offset + i % 17, offset + i % 5, offset + i % 3);
+    const octomap::OcTreeKey far(offset + 3000 + i % 11, offset - 700 + i % 7, offset + i % 2);
+    tree.setLeaf(near, 16, 0.1f * (i % 9 - 4));
+    tree.setLeaf(far, 16, 0.7f);
+    without.setLeaf(near, 16, 0.1f * (i % 9 - 4));
+  }
+  tree.setLeaf(octomap::OcTreeKey(offset + 3060, offset - 650, offset + 40), 13, -1.0f);  // a coarse leaf too
+  tree.updateInnerOccupancy();
+  without.updateInnerOccupancy();
+  const octomap::OcTreeKey far_tile(offset + 3000, offset - 700, offset);
+  ASSERT_TRUE(tree.dropNode(far_tile, MapAccumulator::kTileDepth));
+  tree.updateInnerOccupancy();
+  EXPECT_TRUE(fullTree(tree) == fullTree(without)) << "the rest of the tree changed";
+  EXPECT_EQ(tree.size(), tree.calcNumNodes());
+  EXPECT_FALSE(tree.dropNode(far_tile, MapAccumulator::kTileDepth)) << "nothing is left there";
+  ASSERT_TRUE(tree.dropNode(octomap::OcTreeKey(offset, offset, offset), MapAccumulator::kTileDepth));
+  EXPECT_EQ(tree.size(), 0u);
+  EXPECT_EQ(tree.getRoot(), nullptr);
+}
+
+// A flight that leaves its start, comes back, and leaves again: with a small
+// window and a store, the whole mission's map is the map an unbounded
+// accumulator builds from the same updates, node for node, while the live
+// map holds only the window.
+TEST(MissionMap, TilesGoToTheStoreAndComeBackUnchanged) {
+  MapAccumulatorConfig windowed;
+  windowed.max_extent_m = 40.0;
+  MapAccumulatorConfig unbounded;
+  unbounded.max_extent_m = 0.0;
+  MissionMap mission(windowed);
+  mission.attachStore(std::make_shared<TileStore>(freshDatabase("round_trip"), kRes));
+  MapAccumulator reference(unbounded);
+  auto fly = [&](int x0, float value) {
+    for (int i = 0; i < 2 * static_cast<int>(MapAccumulator::kPruneOrigins); ++i) {
+      const GridUpdate u = singleCell(Eigen::Vector3i(x0 + i % 40, i % 7, i % 3), value);
+      ASSERT_TRUE(mission.integrate(u));
+      ASSERT_TRUE(reference.integrate(u));
+    }
+  };
+  fly(0, 0.85f);
+  fly(4000, 0.4f);  // 1 km away
+  const MaintainResult away = mission.maintain();
+  EXPECT_GE(away.tiles_stored, 1u);
+  EXPECT_EQ(mission.live().tree().search(0.1, 0.1, 0.1), nullptr) << "the start left RAM";
+  fly(0, -0.4f);  // back: the stored tiles come back and take the new updates
+  EXPECT_EQ(mission.maintain().tiles_stored, 1u) << "the far tile goes now";
+  ASSERT_NE(mission.live().tree().search(0.1, 0.1, 0.1), nullptr);
+  fly(-4000, 0.4f);
+  mission.maintain();
+  EXPECT_LT(mission.live().tree().getNumLeafNodes(), reference.tree().getNumLeafNodes() / 2);
+  mission.checkpoint();
+  ASSERT_TRUE(mission.store()->flush());
+  const auto whole = MissionMap::assemble(*mission.store(), Eigen::AlignedBox3d());
+  EXPECT_TRUE(fullTree(*whole) == fullTree(reference.tree())) << "the mission's map differs from the reference";
+  // A region of it: only the start.
+  const auto start = MissionMap::assemble(*mission.store(), Eigen::AlignedBox3d(Eigen::Vector3d(-1, -1, -1),
+                                                                                 Eigen::Vector3d(11, 3, 2)));
+  EXPECT_EQ(start->getNumLeafNodes(), 2 * MapAccumulator::kPruneOrigins);  // the first flight's cells, all distinct
+}
+
+// One process per database; a database of another resolution or not of this
+// format is refused with a reason, not overwritten.
+TEST(TileStore, RefusesASecondOpenerAndAnotherResolution) {
+  const std::string path = freshDatabase("lock");
+  {
+    TileStore first(path, kRes);
+    try {
+      TileStore second(path, kRes);
+      FAIL() << "a second store opened a locked database";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("locked"), std::string::npos) << e.what();
+    }
+  }
+  try {
+    TileStore coarse(path, 0.5);
+    FAIL() << "a 0.5 m store opened a 0.25 m database";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("0.25"), std::string::npos) << e.what();
+  }
+  const std::string text = ::testing::TempDir() + "/not_a_database.db";
+  {
+    FILE* f = std::fopen(text.c_str(), "w");
+    ASSERT_NE(f, nullptr);
+    std::fputs("this is not a database, it is a text file with enough words to fill a page header", f);
+    std::fclose(f);
+  }
+  EXPECT_THROW(TileStore(text, kRes), std::runtime_error);
+  TileStore reopened(path, kRes);  // the first closed: open again
+  EXPECT_TRUE(reopened.tiles().empty());
+}
+
+// kill -9 in mid-flight, several times at different moments: the database
+// opens again (the lock goes with the process), holds every update up to the
+// last checkpoint the flight reported, and takes new tiles.
+TEST(MissionMap, KillNineLosesOnlyWhatCameAfterTheLastCheckpoint) {
+  constexpr int kCheckpointEvery = 500;  // updates
+  constexpr int kMaxUpdates = 30000;     // 7.5 km of cells along x: inside the key range
+  for (int trial = 0; trial < 3; ++trial) {
+    const std::string path = freshDatabase("kill9");
+    int report[2];
+    ASSERT_EQ(pipe(report), 0);
+    const pid_t child = fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+      close(report[0]);
+      MapAccumulatorConfig config;
+      config.max_extent_m = 30.0;  // tiles leave RAM as the flight goes on
+      MissionMap mission(config);
+      mission.attachStore(std::make_shared<TileStore>(path, kRes));
+      for (int i = 0; i < kMaxUpdates; ++i) {
+        mission.integrate(singleCell(Eigen::Vector3i(i, (i * 7) % 50, 0), 2.0f));  // a new cell each time
+        if (i % 100 == 99) mission.maintain();
+        if (i % kCheckpointEvery == kCheckpointEvery - 1) {
+          mission.checkpoint();
+          if (!mission.store()->flush()) _exit(3);
+          if (write(report[1], &i, sizeof i) != sizeof i) _exit(4);
+        }
+      }
+      pause();  // wait for the kill
+      _exit(0);
+    }
+    close(report[1]);
+    int last = -1, reported = 0;
+    while (reported < 3 + trial && read(report[0], &last, sizeof last) == sizeof last) ++reported;
+    ASSERT_EQ(reported, 3 + trial) << "the flight stopped early";
+    std::this_thread::sleep_for(std::chrono::microseconds(700 * trial));  // lands at another point each trial
+    ASSERT_EQ(kill(child, SIGKILL), 0);
+    int status = 0;
+    ASSERT_EQ(waitpid(child, &status, 0), child);
+    ASSERT_TRUE(WIFSIGNALED(status)) << "the flight ended before the kill";
+    int later = 0;
+    while (read(report[0], &later, sizeof later) == sizeof later) last = later;  // checkpoints before the kill
+    close(report[0]);
+
+    TileStore reopened(path, kRes);
+    const auto whole = MissionMap::assemble(reopened, Eigen::AlignedBox3d());
+    for (int i = 0; i <= last; ++i) {
+      const octomap::OcTreeKey key(static_cast<octomap::key_type>(i + 32768),
+                                   static_cast<octomap::key_type>((i * 7) % 50 + 32768), 32768);
+      const octomap::OcTreeNode* n = whole->search(key);
+      ASSERT_TRUE(n && n->getLogOdds() > 0.0f) << "trial " << trial << ": update " << i << " of " << last
+                                               << " (checkpointed) is missing";
+    }
+    EXPECT_GE(occupiedLeaves(*whole), static_cast<size_t>(last + 1));
+    reopened.put(MapAccumulator::TileIndex(100, 100, 0), {MapAccumulator::Leaf{}});
+    EXPECT_TRUE(reopened.flush()) << reopened.status().last_error;
+  }
+}
+
+// A full disk (here: a file size limit) fails the write with the reason and
+// loses nothing: the tile stays queued, get() still returns it, and it is
+// written once there is room again.
+TEST(TileStore, AFullDiskIsAnErrorAndLosesNothing) {
+  const std::string path = freshDatabase("full");
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    signal(SIGXFSZ, SIG_IGN);  // a write past the limit fails with EFBIG instead of killing
+    int code = 0;
+    {
+      TileStore store(path, kRes);
+      std::vector<MapAccumulator::Leaf> leaves;
+      for (int i = 0; i < 40000; ++i) {
+        MapAccumulator::Leaf leaf;
+        leaf.key = octomap::OcTreeKey(static_cast<octomap::key_type>(32768 + i % 200),
+                                      static_cast<octomap::key_type>(32768 + i / 200), 32768);
+        leaf.log_odds = 0.5f;
+        leaves.push_back(leaf);
+      }
+      rlimit limit{};
+      getrlimit(RLIMIT_FSIZE, &limit);
+      const rlim_t unlimited = limit.rlim_cur;
+      limit.rlim_cur = 64 * 1024;  // far less than the tile
+      setrlimit(RLIMIT_FSIZE, &limit);
+      store.put(MapAccumulator::TileIndex(0, 0, 0), leaves);
+      std::vector<MapAccumulator::Leaf> back;
+      if (store.flush()) code = 10;                                  // the write must fail
+      else if (store.status().last_error.empty()) code = 11;         // with a reason
+      else if (!store.get(MapAccumulator::TileIndex(0, 0, 0), &back) || back.size() != leaves.size()) code = 12;
+      limit.rlim_cur = unlimited;
+      setrlimit(RLIMIT_FSIZE, &limit);
+      if (code == 0 && !store.flush()) code = 13;  // room again: written
+      if (code == 0 && store.status().queued != 0) code = 14;
+    }
+    if (code == 0) {
+      TileStore reopened(path, kRes);
+      std::vector<MapAccumulator::Leaf> back;
+      if (!reopened.get(MapAccumulator::TileIndex(0, 0, 0), &back) || back.size() != 40000u) code = 15;
+    }
+    _exit(code);
+  }
+  int status = 0;
+  ASSERT_EQ(waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << "10: a write past the limit succeeded, 11: no reason, 12: the tile was "
+                                       "lost, 13/14: not written once there was room, 15: not there after reopening";
+}
