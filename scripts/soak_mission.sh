@@ -85,7 +85,7 @@ fig.tight_layout(); fig.savefig(f'{out}/soak.png', dpi=80)
 finite = lambda v: [x for x in v if not math.isnan(x)]
 pct = lambda v, q: sorted(v)[min(len(v) - 1, int(q * len(v)))] if v else float('nan')
 last = rows[-1]
-maps = sorted(glob.glob(f'{map_dir}/*.bt') + glob.glob(f'{map_dir}/*.ot'))
+maps = sorted(glob.glob(f'{map_dir}/*.bt') + glob.glob(f'{map_dir}/*.ot') + glob.glob(f'{map_dir}/*.db'))
 with open(f'{out}/summary.md', 'w') as f:
     f.write(f'| figure | value |\n|---|---:|\n')
     f.write(f'| replay wall time [s] | {t[-1]:.0f} |\n')
@@ -94,6 +94,10 @@ with open(f'{out}/summary.md', 'w') as f:
     rss = finite(col('rss_mib'))
     f.write(f'| manager RSS first / max / last [MiB] | {rss[0]:.0f} / {max(rss):.0f} / {rss[-1]:.0f} |\n')
     f.write(f'| fusion p50 / p99 of the per-second p99 [ms] | {pct(finite(col("fusion_p50_ms")), 0.5):.2f} / {pct(finite(col("fusion_p99_ms")), 0.99):.2f} |\n')
+    slow = sum(1 for v in finite(col('fusion_p99_ms')) if v > 100.0)
+    f.write(f'| seconds with a fusion p99 over 100 ms | {slow} of {len(rows)} |\n')
+    flight = [r for r in rows if float(r['updates_received'] or 0) < float(last['updates_received'])] or rows
+    f.write(f'| manager RSS max while mapping [MiB] | {max(finite([float(r["rss_mib"]) for r in flight])):.0f} |\n')
     f.write(f'| mapper p50 / p99 of the per-second p99 [ms] | {pct(finite(col("mapper_p50_ms")), 0.5):.2f} / {pct(finite(col("mapper_p99_ms")), 0.99):.2f} |\n')
     f.write(f'| map outputs mean / max [MB/s] | {sum(out_mb_s) / len(out_mb_s):.2f} / {max(out_mb_s):.2f} |\n')
     for k in byte_cols:

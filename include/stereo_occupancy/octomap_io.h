@@ -4,6 +4,8 @@
 
 #include <octomap/OcTree.h>
 
+#include <functional>
+#include <ostream>
 #include <string>
 
 namespace stereo_occupancy {
@@ -15,6 +17,10 @@ namespace stereo_occupancy {
 /// (removeStaleTemporaries).
 /// @throws std::runtime_error.
 void writeOcTree(const octomap::OcTree& tree, const std::string& path);
+
+/// writeOcTree's atomic write for any content: @p write fills the stream
+/// (false or an exception: failed). @throws std::runtime_error naming the file and the reason.
+void writeFileAtomically(const std::string& path, const std::function<bool(std::ostream&)>& write);
 
 /// Removes the files path + ".tmp" + PID in @p path's directory whose process
 /// PID no longer exists (left by a writer killed during writeOcTree).

@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <functional>
 #include <ostream>
 #include <streambuf>
 #include <stdexcept>
@@ -84,18 +85,28 @@ class FileDescriptorBuffer : public std::streambuf {
   char buffer_[1 << 16];
 };
 
-/// Writes the tree into @p tmp and syncs it to disk; "" or the reason it failed.
-std::string writeAndSync(const octomap::OcTree& tree, bool full, const std::string& tmp) {
+/// Writes into @p tmp and syncs it to disk; "" or the reason it failed.
+std::string writeAndSync(const std::function<bool(std::ostream&)>& write, const std::string& tmp) {
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) return std::strerror(errno);
   FileDescriptorBuffer buffer(fd);
   std::ostream out(&buffer);
-  const bool written = full ? tree.write(out) : tree.writeBinaryConst(out);
-  out.flush();
   std::string error;
-  if (!buffer.flushAll() || buffer.error() != 0) error = std::strerror(buffer.error());
-  else if (!written || !out.good()) error = "octomap could not serialise the tree";
-  else if (::fsync(fd) != 0) error = std::string("fsync: ") + std::strerror(errno);
+  bool written = false;
+  try {
+    written = write(out);
+  } catch (const std::exception& e) {
+    error = e.what();
+  }
+  out.flush();
+  if (error.empty()) {  // else the writer's own reason
+    if (!buffer.flushAll() || buffer.error() != 0)
+      error = std::strerror(buffer.error());
+    else if (!written || !out.good())
+      error = "octomap could not serialise the tree";
+    else if (::fsync(fd) != 0)
+      error = std::string("fsync: ") + std::strerror(errno);
+  }
   if (::close(fd) != 0 && error.empty()) error = std::string("close: ") + std::strerror(errno);
   return error;
 }
@@ -106,12 +117,16 @@ void writeOcTree(const octomap::OcTree& tree, const std::string& path) {
   const bool full = path.size() >= 3 && path.compare(path.size() - 3, 3, ".ot") == 0;
   const bool binary = path.size() >= 3 && path.compare(path.size() - 3, 3, ".bt") == 0;
   if (!full && !binary) throw std::runtime_error("'" + path + "': the map file must end in .ot or .bt");
+  writeFileAtomically(path, [&](std::ostream& out) { return full ? tree.write(out) : tree.writeBinaryConst(out); });
+}
+
+void writeFileAtomically(const std::string& path, const std::function<bool(std::ostream&)>& write) {
   // Write a temporary file beside the target, sync it, then rename it into
   // place and sync the directory: a crash, a kill or a full disk during the
   // write leaves the previous file intact, and a renamed file is on disk.
   removeStaleTemporaries(path);
   const std::string tmp = path + ".tmp" + std::to_string(::getpid());
-  const std::string error = writeAndSync(tree, full, tmp);
+  const std::string error = writeAndSync(write, tmp);
   if (!error.empty()) {
     std::remove(tmp.c_str());
     throw std::runtime_error("cannot write '" + path + "': " + error);

@@ -47,6 +47,8 @@ class OctomapAccumulator : public nodelet::Nodelet {
   void updateCallback(const ros::MessageEvent<const OccupancyUpdate>& event);
   void publish(const ros::TimerEvent&);
   void publishOutputs();  ///< publish()'s work; may throw
+  /// The marker arrays of the blocks changed since the last publish; requires mutex_.
+  void publishChangedBlocks(const octomap::OcTree& tree, const std_msgs::Header& header);
   bool saveMap(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response);
   bool clearBox(BoundingBoxQuery::Request& request, BoundingBoxQuery::Response&);
   /// The map on request: binary (octomap_binary) or with log-odds (octomap_full).
@@ -71,7 +73,9 @@ class OctomapAccumulator : public nodelet::Nodelet {
   std::vector<double> window_fusion_ms_;  ///< per update since the last diagnostics report
   std::string last_problem_;
   std::string database_problem_;  ///< why the database could not be opened; empty if it was
-  bool changed_since_publish_ = true;
+  bool changed_since_publish_ = true;  ///< the map changed since the markers went out
+  bool full_changed_ = true;           ///< ... since the whole-map outputs went out
+  ros::WallTime last_full_publish_;    ///< when they went out; zero: never
 
   ros::Subscriber update_sub_;
   ros::Publisher octomap_pub_, octomap_full_pub_, markers_pub_, free_markers_pub_, cloud_pub_, projected_pub_;
@@ -116,7 +120,7 @@ void OctomapAccumulator::onInit() {
     std::lock_guard<std::mutex> lock(mutex_);
     if (!fusion_) return;
     fusion_->markAllChanged();
-    changed_since_publish_ = true;
+    changed_since_publish_ = full_changed_ = true;
   };
   markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>("occupied_cells_vis_array", 10,
                                                                whole_map_for_new_subscriber);
@@ -233,7 +237,7 @@ void OctomapAccumulator::updateCallback(const ros::MessageEvent<const OccupancyU
   if (fusion_ms_.size() < kMaxTimings) fusion_ms_.push_back(last_fusion_ms_);
   if (window_fusion_ms_.size() < kMaxTimings) window_fusion_ms_.push_back(last_fusion_ms_);
   if (!frame_chosen) NODELET_INFO("the map is in frame '%s' (the first update's)", fusion_->frameId().c_str());
-  changed_since_publish_ = true;
+  changed_since_publish_ = full_changed_ = true;
 }
 
 std_msgs::Header OctomapAccumulator::mapHeader() const {
@@ -262,33 +266,26 @@ void OctomapAccumulator::publishOutputs() {
     fusion_->markAllChanged();  // no changes kept for nobody: the next subscriber gets the whole map
     return;
   }
-  if (!changed_since_publish_ || fusion_->frameId().empty()) return;
+  if (fusion_->frameId().empty()) return;
+  // The whole map at most every full_map_period_s, the changed blocks at
+  // each publish: a large map's octree and cloud would cost more than its changes.
+  const ros::WallTime now = ros::WallTime::now();
+  const bool full_due = full_changed_ && (last_full_publish_.isZero() || now < last_full_publish_ ||
+                                          (now - last_full_publish_).toSec() >= params_.full_map_period_s);
+  if (!changed_since_publish_ && !full_due) return;
   changed_since_publish_ = false;
   const std_msgs::Header header = mapHeader();
   const octomap::OcTree& tree = fusion_->map().tree();
+  publishChangedBlocks(tree, header);
+  if (!full_due) return;
+  full_changed_ = false;
+  last_full_publish_ = now;
   for (const bool binary : {true, false}) {
     const ros::Publisher& pub = binary ? octomap_pub_ : octomap_full_pub_;
     if (!wanted(pub)) continue;
     auto msg = boost::make_shared<Octomap>();
     toMsg(tree, binary, header, msg.get());
     pub.publish(msg);
-  }
-  // Both marker arrays from the one set of changed blocks.
-  if (wanted(markers_pub_) || wanted(free_markers_pub_)) {
-    bool all = false;
-    const std::vector<MapAccumulator::BlockIndex> blocks = fusion_->takeChangedBlocks(&all);
-    if ((all || !blocks.empty()) && wanted(markers_pub_)) {
-      auto msg = boost::make_shared<visualization_msgs::MarkerArray>();
-      blockMarkers(tree, blocks, all, header, msg.get());
-      markers_pub_.publish(msg);
-    }
-    if ((all || !blocks.empty()) && wanted(free_markers_pub_)) {
-      auto msg = boost::make_shared<visualization_msgs::MarkerArray>();
-      freeBlockMarkers(tree, blocks, all, header, msg.get());
-      free_markers_pub_.publish(msg);
-    }
-  } else {
-    fusion_->markAllChanged();  // nobody to send changes to: the next subscriber gets the whole map
   }
   if (wanted(cloud_pub_)) {
     auto msg = boost::make_shared<sensor_msgs::PointCloud2>();
@@ -299,6 +296,29 @@ void OctomapAccumulator::publishOutputs() {
     auto msg = boost::make_shared<nav_msgs::OccupancyGrid>();
     toMsg(projectOccupancy(tree, params_.projection_min_z_m, params_.projection_max_z_m), header, msg.get());
     projected_pub_.publish(msg);
+  }
+}
+
+void OctomapAccumulator::publishChangedBlocks(const octomap::OcTree& tree, const std_msgs::Header& header) {
+  const auto wanted = [](const ros::Publisher& pub) { return pub.getNumSubscribers() > 0; };
+  const bool free_wanted = params_.publish_free_space && wanted(free_markers_pub_);
+  if (!wanted(markers_pub_) && !free_wanted) {
+    fusion_->markAllChanged();  // nobody to send changes to: the next subscriber gets the whole map
+    return;
+  }
+  // Both marker arrays from the one set of changed blocks.
+  bool all = false;
+  const std::vector<MapAccumulator::BlockIndex> blocks = fusion_->takeChangedBlocks(&all);
+  if (!all && blocks.empty()) return;
+  if (wanted(markers_pub_)) {
+    auto msg = boost::make_shared<visualization_msgs::MarkerArray>();
+    blockMarkers(tree, blocks, all, header, msg.get());
+    markers_pub_.publish(msg);
+  }
+  if (free_wanted) {
+    auto msg = boost::make_shared<visualization_msgs::MarkerArray>();
+    freeBlockMarkers(tree, blocks, all, header, msg.get());
+    free_markers_pub_.publish(msg);
   }
 }
 
@@ -326,10 +346,10 @@ bool OctomapAccumulator::clearBox(BoundingBoxQuery::Request& request, BoundingBo
     cleared = fusion_->clearBox(lo, hi);
   } catch (const std::exception& e) {  // bad_alloc for a huge box: nothing may leave a callback
     NODELET_ERROR("clear_bbx failed: %s", e.what());
-    changed_since_publish_ = true;
+    changed_since_publish_ = full_changed_ = true;
     return false;
   }
-  changed_since_publish_ = true;
+  changed_since_publish_ = full_changed_ = true;
   NODELET_INFO("clear_bbx: cleared %lu occupied cells in [%.2f, %.2f, %.2f] .. [%.2f, %.2f, %.2f]",
                static_cast<unsigned long>(cleared), lo.x(), lo.y(), lo.z(), hi.x(), hi.y(), hi.z());
   return true;
@@ -362,7 +382,7 @@ std::vector<std::string> OctomapAccumulator::save(std::unique_lock<std::mutex>& 
     lock.unlock();
     std::string error;
     try {
-      paths = MissionMap::saveStore(*store, params_.save_dir, params_.map_name);
+      paths = MissionMap::saveStore(*store, params_.save_dir, params_.map_name, params_.map.occupancy_threshold_prob);
     } catch (const std::exception& e) {
       error = e.what();
     }
@@ -403,7 +423,7 @@ bool OctomapAccumulator::saveMap(std_srvs::Trigger::Request&, std_srvs::Trigger:
 bool OctomapAccumulator::reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
   std::lock_guard<std::mutex> lock(mutex_);
   fusion_->reset();
-  changed_since_publish_ = true;
+  changed_since_publish_ = full_changed_ = true;
   NODELET_INFO("map reset");
   return true;
 }

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <sstream>
 #include <stdexcept>
 
@@ -33,8 +34,8 @@ std::string serialise(const std::vector<MapAccumulator::Leaf>& leaves, double re
   return out.str();
 }
 
-std::vector<MapAccumulator::Leaf> deserialise(const void* data, int bytes, double resolution_m) {
-  std::istringstream in(std::string(static_cast<const char*>(data), static_cast<size_t>(bytes)));
+std::vector<MapAccumulator::Leaf> deserialise(const std::string& bytes, double resolution_m) {
+  std::istringstream in(bytes);
   auto tree = std::make_unique<octomap::OcTree>(resolution_m);
   if (!tree->readData(in) || in.fail()) throw std::runtime_error("a tile row is not OcTree data");
   std::vector<MapAccumulator::Leaf> leaves;
@@ -197,13 +198,9 @@ bool TileStore::get(const TileIndex& tile, std::vector<Leaf>* leaves) const {
     }
     if (!stored_.count(pack(tile))) return false;
   }
-  std::lock_guard<std::mutex> lock(db_mutex_);
-  Statement read(db_, "SELECT octree FROM tiles WHERE x = ? AND y = ? AND z = ?");
-  read.bindTile(tile);
-  const int rc = sqlite3_step(read.get());
-  if (rc == SQLITE_DONE) return false;
-  if (rc != SQLITE_ROW) throw std::runtime_error("tile database '" + path_ + "': " + sqlite3_errmsg(db_));
-  *leaves = deserialise(sqlite3_column_blob(read.get(), 0), sqlite3_column_bytes(read.get(), 0), resolution_m_);
+  std::string bytes;
+  if (!rowData(tile, &bytes)) return false;
+  *leaves = deserialise(bytes, resolution_m_);
   return true;
 }
 
@@ -219,6 +216,39 @@ std::vector<TileStore::TileIndex> TileStore::tiles() const {
   }
   for (uint64_t key : all) tiles.push_back(unpack(key));
   return tiles;
+}
+
+std::vector<TileRow> TileStore::rows() const {
+  std::lock_guard<std::mutex> lock(db_mutex_);
+  Statement list(db_, "SELECT x, y, z, length(octree), substr(octree, 1, 4) FROM tiles");
+  std::vector<TileRow> rows;
+  int rc;
+  while ((rc = sqlite3_step(list.get())) == SQLITE_ROW) {
+    TileRow row;
+    row.tile = TileIndex(sqlite3_column_int(list.get(), 0), sqlite3_column_int(list.get(), 1),
+                         sqlite3_column_int(list.get(), 2));
+    const size_t bytes = static_cast<size_t>(sqlite3_column_int64(list.get(), 3));
+    const size_t path_bytes = MapAccumulator::kTileDepth * kRowNodeBytes;
+    if (bytes <= path_bytes || bytes % kRowNodeBytes != 0 || sqlite3_column_bytes(list.get(), 4) != sizeof(float))
+      throw std::runtime_error("tile database '" + path_ + "': a row is not tile data");
+    row.nodes = (bytes - path_bytes) / kRowNodeBytes;
+    std::memcpy(&row.max_log_odds, sqlite3_column_blob(list.get(), 4), sizeof(float));
+    rows.push_back(row);
+  }
+  if (rc != SQLITE_DONE) throw std::runtime_error("tile database '" + path_ + "': " + sqlite3_errmsg(db_));
+  return rows;
+}
+
+bool TileStore::rowData(const TileIndex& tile, std::string* bytes) const {
+  std::lock_guard<std::mutex> lock(db_mutex_);
+  Statement read(db_, "SELECT octree FROM tiles WHERE x = ? AND y = ? AND z = ?");
+  read.bindTile(tile);
+  const int rc = sqlite3_step(read.get());
+  if (rc == SQLITE_DONE) return false;
+  if (rc != SQLITE_ROW) throw std::runtime_error("tile database '" + path_ + "': " + sqlite3_errmsg(db_));
+  bytes->assign(static_cast<const char*>(sqlite3_column_blob(read.get(), 0)),
+                static_cast<size_t>(sqlite3_column_bytes(read.get(), 0)));
+  return true;
 }
 
 bool TileStore::flush() {

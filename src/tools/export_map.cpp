@@ -18,7 +18,9 @@ namespace {
 
 const char* kUsage =
     "usage: export_map --database FILE.db --out FILE.bt|FILE.ot [--min X Y Z --max X Y Z]\n"
-    "  --min, --max: the box to export, in the map's frame [m]; default: everything\n";
+    "                  [--occupancy-threshold P]\n"
+    "  --min, --max: the box to export, in the map's frame [m]; default: everything\n"
+    "  --occupancy-threshold: cells at or above it are occupied in a .bt (default 0.5, the accumulator's)\n";
 
 Eigen::Vector3d parsePoint(const std::string& option, int argc, char** argv, int* i) {
   Eigen::Vector3d p;
@@ -30,6 +32,7 @@ int run(int argc, char** argv) {
   std::string database, out;
   Eigen::AlignedBox3d box;
   bool has_min = false, has_max = false;
+  double threshold = so::MapAccumulatorConfig().occupancy_threshold_prob;
   Eigen::Vector3d lo, hi;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -40,6 +43,9 @@ int run(int argc, char** argv) {
       database = tools::nextValue(argc, argv, &i);
     } else if (a == "--out") {
       out = tools::nextValue(argc, argv, &i);
+    } else if (a == "--occupancy-threshold") {
+      threshold = tools::parseNumber(a, tools::nextValue(argc, argv, &i));
+      if (!(threshold > 0.0 && threshold < 1.0)) throw tools::UsageError("--occupancy-threshold must be in (0, 1)");
     } else if (a == "--min") {
       lo = parsePoint(a, argc, argv, &i);
       has_min = true;
@@ -61,10 +67,14 @@ int run(int argc, char** argv) {
   if (!bt && !ot) throw tools::UsageError("--out must end in .bt or .ot");
   if (access(database.c_str(), R_OK) != 0) throw std::runtime_error("cannot read '" + database + "'");
   so::TileStore store(database, 0.0);  // its own resolution
-  const auto tree = so::MissionMap::assemble(store, box);
-  so::writeOcTree(*tree, out);
-  std::cout << "{\"tiles\": " << store.tiles().size() << ", \"leaves\": " << tree->getNumLeafNodes()
-            << ", \"resolution_m\": " << store.resolution() << ", \"out\": \"" << out << "\"}" << std::endl;
+  if (box.isEmpty()) {
+    // The whole mission, a tile at a time: it may not fit in memory at once.
+    so::MissionMap::writeStore(store, out, threshold);
+  } else {
+    so::writeOcTree(*so::MissionMap::assemble(store, box), out);
+  }
+  std::cout << "{\"tiles\": " << store.tiles().size() << ", \"resolution_m\": " << store.resolution()
+            << ", \"out\": \"" << out << "\"}" << std::endl;
   return 0;
 }
 

@@ -269,6 +269,7 @@ TEST_F(OctomapServerTest, AnAccumulatorStartsFromASavedMap) {
   std_srvs::Trigger save;
   ASSERT_TRUE(ros::service::call("/octomap_accumulator/save_map", save));
   ASSERT_TRUE(save.response.success) << save.response.message;
+  nh_.setParam("/restored/full_map_period_s", 0.0);
   nh_.setParam("/restored/map_file", "/tmp/stereo_occupancy_octomap_server/stereo_occupancy_map.ot");
   OctomapConstPtr restored;
   ros::Subscriber sub = nh_.subscribe<Octomap>("/restored/octomap_binary", 1, [&](const OctomapConstPtr& msg) {
@@ -301,6 +302,7 @@ TEST_F(OctomapServerTest, ARestartedAccumulatorContinuesFromItsDatabase) {
   nh_.setParam("/mission/save_dir", dir);
   nh_.setParam("/mission/map_name", "m");
   nh_.setParam("/mission/world_frame", "map");
+  nh_.setParam("/mission/full_map_period_s", 0.0);
   OctomapConstPtr mission_map;
   ros::Subscriber sub = nh_.subscribe<Octomap>("/mission/octomap_binary", 1, [&](const OctomapConstPtr& msg) {
     std::lock_guard<std::mutex> lock(mutex_);

@@ -9,6 +9,8 @@
 
 #include <chrono>
 #include <cstdio>
+#include <fstream>
+#include <iterator>
 #include <memory>
 #include <string>
 #include <thread>
@@ -17,6 +19,7 @@
 #include "../core/single_cell.h"
 #include "stereo_occupancy/accumulating_octree.h"
 #include "stereo_occupancy/grid_update.h"
+#include "stereo_occupancy/octomap_io.h"
 #include "stereo_occupancy/store/mission_map.h"
 #include "stereo_occupancy/store/tile_store.h"
 
@@ -30,6 +33,12 @@ std::string freshDatabase(const std::string& name) {
   const std::string path = ::testing::TempDir() + "/" + name + ".db";
   for (const char* suffix : {"", "-wal", "-shm", "-journal"}) std::remove((path + suffix).c_str());
   return path;
+}
+
+/// The whole file at @p path.
+std::string fileBytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
 }
 
 /// Cells with positive log-odds in @p tree.
@@ -101,6 +110,25 @@ TEST(MissionMap, TilesGoToTheStoreAndComeBackUnchanged) {
   ASSERT_TRUE(mission.store()->flush());
   const auto whole = MissionMap::assemble(*mission.store(), Eigen::AlignedBox3d());
   EXPECT_TRUE(fullTree(*whole) == fullTree(reference.tree())) << "the mission's map differs from the reference";
+  // Written a tile at a time, the same files as the assembled tree gives;
+  // with two tiles that are one leaf each (a free and an occupied one).
+  for (const float value : {-1.0f, 2.0f}) {
+    MapAccumulator::Leaf leaf;
+    const int x = value > 0 ? 3 : -7;
+    leaf.key = octomap::OcTreeKey(static_cast<octomap::key_type>(32768 + x * MapAccumulator::kTileCells), 32768, 32768);
+    leaf.depth = MapAccumulator::kTileDepth;
+    leaf.log_odds = value;
+    mission.store()->put(MapAccumulator::TileIndex(x, 0, 0), {leaf});
+  }
+  ASSERT_TRUE(mission.store()->flush());
+  const auto with_leaves = MissionMap::assemble(*mission.store(), Eigen::AlignedBox3d());
+  for (const char* ext : {".bt", ".ot"}) {
+    const std::string streamed = ::testing::TempDir() + "/streamed" + ext, assembled = ::testing::TempDir() + "/assembled" + ext;
+    MissionMap::writeStore(*mission.store(), streamed, windowed.occupancy_threshold_prob);
+    writeOcTree(*with_leaves, assembled);
+    EXPECT_TRUE(fileBytes(streamed) == fileBytes(assembled)) << ext << ": the streamed file differs";
+    EXPECT_GT(fileBytes(streamed).size(), 1000u);
+  }
   // A region of it: only the start.
   const auto start = MissionMap::assemble(*mission.store(), Eigen::AlignedBox3d(Eigen::Vector3d(-1, -1, -1),
                                                                                  Eigen::Vector3d(11, 3, 2)));

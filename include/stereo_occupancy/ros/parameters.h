@@ -65,6 +65,13 @@ struct OctomapAccumulatorParameters {
   std::string world_frame = "map";
   MapAccumulatorConfig map;
   double publish_rate_hz = 1.0;  ///< rate of the map outputs, while subscribed [Hz]
+  /// The outputs that carry the whole live map (octomap_binary, octomap_full,
+  /// the point cloud, projected_map) go out at most this often; the markers
+  /// carry the changes at publish_rate_hz. 0: at publish_rate_hz too [s].
+  double full_map_period_s = 10.0;
+  /// Publish free_cells_vis_array (octomap_server's publish_free_space): the
+  /// free cells' markers cost more than all other outputs together.
+  bool publish_free_space = false;
   double prune_period_s = 5.0;   ///< how often cells beyond max_extent_m go to the database (or are dropped) [s]
   /// Where ~save_map writes and the map is saved on shutdown, and where the
   /// mission's database <map_name>.db lives; empty: nowhere (and cells beyond max_extent_m are dropped).
@@ -86,6 +93,11 @@ struct OctomapAccumulatorParameters {
     MapAccumulatorConfig::forEachParameter(p.map, f);
     f(numberParameter("publish_rate_hz", "Hz", 0.01, 100.0, "rate of the map outputs, while subscribed"),
       p.publish_rate_hz);
+    f(numberParameter("full_map_period_s", "s", 0.0, 3600.0,
+                      "the whole-map outputs go out at most this often; 0: at publish_rate_hz"),
+      p.full_map_period_s);
+    f(textParameter("publish_free_space", "publish free_cells_vis_array (octomap_server's publish_free_space)"),
+      p.publish_free_space);
     f(numberParameter("prune_period_s", "s", 0.1, 86400.0,
                       "how often cells beyond max_extent_m go to the database, or are dropped without one"),
       p.prune_period_s);

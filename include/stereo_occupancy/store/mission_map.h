@@ -65,7 +65,14 @@ class MissionMap {
   /// it outside the lock that serialises the map): flushes @p store, then
   /// writes all its tiles.
   static std::vector<std::string> saveStore(TileStore& store, const std::string& directory,
-                                            const std::string& base_name);
+                                            const std::string& base_name, double occupancy_threshold_prob);
+
+  /// Writes every tile of @p store to @p path (.bt or .ot, atomically as
+  /// writeOcTree) one tile at a time: the file of assemble()'s tree, byte for
+  /// byte, in the memory of one tile. Cells at or above
+  /// @p occupancy_threshold_prob are occupied in a .bt.
+  /// @throws std::runtime_error naming the file and the reason.
+  static void writeStore(const TileStore& store, const std::string& path, double occupancy_threshold_prob);
 
   /// The store's tiles that overlap [W_min, W_max], cut to it, as one tree
   /// (the whole store for an empty box). @throws std::runtime_error for an unreadable row.

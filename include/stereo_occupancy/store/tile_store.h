@@ -30,6 +30,13 @@ struct TileStoreStatus {
   std::string last_error;      ///< the last failure's reason; empty if none
 };
 
+/// A stored tile's row as the streaming writer needs it (TileStore::rows).
+struct TileRow {
+  MapAccumulator::TileIndex tile;
+  size_t nodes = 0;          ///< nodes of the tile's subtree (the tile's node and all below)
+  float max_log_odds = 0.0f;  ///< the tile node's value: its leaves' largest log-odds
+};
+
 /// A database of map tiles (MapAccumulator::TileIndex -> leaves). Thread-safe.
 class TileStore {
  public:
@@ -64,6 +71,14 @@ class TileStore {
   bool contains(const TileIndex& tile) const;
   /// Every tile the store has (queued or stored).
   std::vector<TileIndex> tiles() const;
+  /// The stored rows' summaries, read without their data (after flush(): every tile).
+  std::vector<TileRow> rows() const;
+  /// A stored row's data: OcTree::writeData of a tree holding only the tile,
+  /// so kTileDepth path nodes (kRowNodeBytes each) and then the tile's subtree
+  /// in pre-order. False if there is no row. @throws std::runtime_error on a read error.
+  bool rowData(const TileIndex& tile, std::string* bytes) const;
+  /// Bytes per node in a row (OcTreeNode::writeData's float, then the child bits).
+  static constexpr size_t kRowNodeBytes = sizeof(float) + 1;
   /// Waits until everything queued is committed, or a write fails: then false.
   bool flush();
   /// Deletes every tile (queued ones too).
