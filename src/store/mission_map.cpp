@@ -1,5 +1,9 @@
 #include "stereo_occupancy/store/mission_map.h"
 
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -61,6 +65,11 @@ MaintainResult MissionMap::maintain() {
     if (live_.dropTile(tile) > 0) ++result.tiles_stored;
     resident_.erase(key);
   }
+#ifdef __GLIBC__
+  // A tile is ~10^5 small nodes freed at once; glibc keeps such pages
+  // unless asked, so the process would grow as if the map had stayed.
+  if (result.tiles_stored > 0) malloc_trim(0);
+#endif
   return result;
 }
 
