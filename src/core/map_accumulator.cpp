@@ -305,11 +305,12 @@ std::vector<std::string> MapAccumulator::save(const std::string& directory, cons
 }
 
 namespace {
-/// The lowest key of @p tile along each axis.
-octomap::OcTreeKey tileFirstKey(const MapAccumulator::TileIndex& tile, int offset) {
-  return octomap::OcTreeKey(static_cast<octomap::key_type>(tile.x() * MapAccumulator::kTileCells + offset),
-                            static_cast<octomap::key_type>(tile.y() * MapAccumulator::kTileCells + offset),
-                            static_cast<octomap::key_type>(tile.z() * MapAccumulator::kTileCells + offset));
+/// The lowest and highest key of @p tile along each axis.
+void tileKeys(const MapAccumulator::TileIndex& tile, int offset, octomap::OcTreeKey* lo, octomap::OcTreeKey* hi) {
+  for (int a = 0; a < 3; ++a) {
+    (*lo)[a] = static_cast<octomap::key_type>(tile[a] * MapAccumulator::kTileCells + offset);
+    (*hi)[a] = static_cast<octomap::key_type>((*lo)[a] + MapAccumulator::kTileCells - 1);
+  }
 }
 /// The key range holds 2^kTileDepth tiles per axis, centred on 0.
 bool tileInKeyRange(const MapAccumulator::TileIndex& tile) {
@@ -362,11 +363,8 @@ Eigen::AlignedBox3d MapAccumulator::keptBox() const {
 std::vector<MapAccumulator::Leaf> MapAccumulator::tileLeaves(const TileIndex& tile) const {
   std::vector<Leaf> leaves;
   if (!tileInKeyRange(tile)) return leaves;
-  const int offset = static_cast<int>(tree_->coordToKey(0.0));
-  const octomap::OcTreeKey lo = tileFirstKey(tile, offset);
-  const octomap::OcTreeKey hi(static_cast<octomap::key_type>(lo[0] + kTileCells - 1),
-                              static_cast<octomap::key_type>(lo[1] + kTileCells - 1),
-                              static_cast<octomap::key_type>(lo[2] + kTileCells - 1));
+  octomap::OcTreeKey lo, hi;
+  tileKeys(tile, static_cast<int>(tree_->coordToKey(0.0)), &lo, &hi);
   for (auto it = tree_->begin_leafs_bbx(lo, hi), end = tree_->end_leafs_bbx(); it != end; ++it) {
     Leaf leaf;
     // A leaf coarser than the tile gives the tile's part of it.
@@ -380,11 +378,8 @@ std::vector<MapAccumulator::Leaf> MapAccumulator::tileLeaves(const TileIndex& ti
 
 size_t MapAccumulator::dropTile(const TileIndex& tile) {
   if (!tileInKeyRange(tile)) return 0;
-  const int offset = static_cast<int>(tree_->coordToKey(0.0));
-  const octomap::OcTreeKey lo = tileFirstKey(tile, offset);
-  const octomap::OcTreeKey hi(static_cast<octomap::key_type>(lo[0] + kTileCells - 1),
-                              static_cast<octomap::key_type>(lo[1] + kTileCells - 1),
-                              static_cast<octomap::key_type>(lo[2] + kTileCells - 1));
+  octomap::OcTreeKey lo, hi;
+  tileKeys(tile, static_cast<int>(tree_->coordToKey(0.0)), &lo, &hi);
   size_t leaves = 0;
   for (auto it = tree_->begin_leafs_bbx(lo, hi), end = tree_->end_leafs_bbx(); it != end; ++it) {
     ++leaves;

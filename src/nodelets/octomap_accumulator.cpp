@@ -169,10 +169,11 @@ void OctomapAccumulator::onInit() {
   diagnostics_timer_ = nh.createTimer(ros::Duration(1.0), [this](const ros::TimerEvent&) { diagnostics_->update(); });
 
   const auto& store = fusion_->mission().store();
+  const std::string beyond = store ? "kept in " + store->path() : "dropped";
   NODELET_INFO("OctomapAccumulator: %.3g m cells in frame '%s', live map within %.0f m of the vehicle, beyond it %s, "
                "saving to '%s'",
                params_.map.resolution_m, params_.world_frame.empty() ? "(the first update's)" : params_.world_frame.c_str(),
-               params_.map.max_extent_m, store ? ("kept in " + store->path()).c_str() : "dropped",
+               params_.map.max_extent_m, beyond.c_str(),
                params_.save_dir.empty() ? "(nowhere)" : params_.save_dir.c_str());
 }
 

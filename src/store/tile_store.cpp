@@ -180,14 +180,6 @@ void TileStore::put(const TileIndex& tile, std::vector<Leaf> leaves) {
   wake_writer_.notify_one();
 }
 
-bool TileStore::contains(const TileIndex& tile) const {
-  std::lock_guard<std::mutex> lock(mutex_);
-  const uint64_t key = pack(tile);
-  auto it = queue_.find(key);
-  if (it != queue_.end()) return !it->second.leaves->empty();
-  return stored_.count(key) > 0;
-}
-
 bool TileStore::get(const TileIndex& tile, std::vector<Leaf>* leaves) const {
   {
     std::lock_guard<std::mutex> lock(mutex_);

@@ -46,6 +46,14 @@ std::unique_ptr<octomap::OcTree> treeOf(const Octomap& msg) {
   return tree ? std::move(tree) : std::make_unique<octomap::OcTree>(0.1);
 }
 
+/// True if @p msg's map holds the test wall (12 m ahead) as occupied.
+bool holdsTheWall(const OctomapConstPtr& msg) {
+  if (!msg) return false;
+  const auto tree = treeOf(*msg);
+  const octomap::OcTreeNode* n = tree->search(12.1, 0.1, 2.1);
+  return n && tree->isNodeOccupied(n);
+}
+
 /// The projected map's cell at (x, y) [m]; -2 outside it.
 int cellAt(const nav_msgs::OccupancyGrid& grid, double x, double y) {
   const int i = static_cast<int>(std::floor((x - grid.info.origin.position.x) / grid.info.resolution));
@@ -106,12 +114,7 @@ class OctomapServerTest : public ::testing::Test {
       disparity_pub_.publish(msg);
       ros::WallDuration(0.1).sleep();
     }
-    ASSERT_TRUE(waitFor(mutex_, [&] {
-      if (!latest_map_) return false;
-      const auto tree = treeOf(*latest_map_);
-      const octomap::OcTreeNode* n = tree->search(12.1, 0.1, 2.1);
-      return n && tree->isNodeOccupied(n);
-    }, 20.0)) << "the wall never reached the map";
+    ASSERT_TRUE(waitFor(mutex_, [&] { return holdsTheWall(latest_map_); }, 20.0)) << "the wall never reached the map";
   }
 
   /// The map as the octomap_binary or octomap_full service gives it.
@@ -315,12 +318,8 @@ TEST_F(OctomapServerTest, ARestartedAccumulatorContinuesFromItsDatabase) {
   ASSERT_TRUE(load.response.success);
   ASSERT_TRUE(ros::service::waitForService("/mission/save_map", ros::Duration(10.0)));
   mapTheWall();  // both accumulators take the updates
-  ASSERT_TRUE(waitFor(mutex_, [&] {
-    if (!mission_map) return false;
-    const auto tree = treeOf(*mission_map);
-    const octomap::OcTreeNode* n = tree->search(12.1, 0.1, 2.1);
-    return n && tree->isNodeOccupied(n);
-  }, 20.0)) << "the wall never reached the mission's map";
+  ASSERT_TRUE(waitFor(mutex_, [&] { return holdsTheWall(mission_map); }, 20.0))
+      << "the wall never reached the mission's map";
   ASSERT_TRUE(ros::service::call("/stereo_occupancy_manager/unload_nodelet", unload));  // closes the database
 
   {

@@ -67,8 +67,6 @@ class TileStore {
   /// @p tile's content, queued or stored; false if the store has none.
   /// @throws std::runtime_error if the row cannot be read.
   bool get(const TileIndex& tile, std::vector<Leaf>* leaves) const;
-  /// True if get() would find @p tile. Costs no disk access.
-  bool contains(const TileIndex& tile) const;
   /// Every tile the store has (queued or stored).
   std::vector<TileIndex> tiles() const;
   /// The stored rows' summaries, read without their data (after flush(): every tile).
