@@ -195,7 +195,6 @@ class HostileTest : public ::testing::Test {
 
   ros::NodeHandle nh_;
   ros::Publisher update_pub_, disparity_pub_, lost_pub_;
-  ros::Subscriber map_sub_, diag_sub_, log_sub_, updates_sub_;
   tf2_ros::TransformBroadcaster tf_;
   Eigen::Isometry3d T_W_C_;
   cv::Mat image_;
@@ -204,6 +203,9 @@ class HostileTest : public ::testing::Test {
   std::map<std::string, std::map<std::string, std::string>> diag_;
   std::vector<std::string> warnings_;
   std::vector<ros::Time> mapped_stamps_;
+  // Last, so destroyed first: the spinner's threads run their callbacks until
+  // they are shut down, and the callbacks write the members above.
+  ros::Subscriber map_sub_, diag_sub_, log_sub_, updates_sub_;
 };
 
 const char* kAccumulator = "octomap_accumulator: accumulator";

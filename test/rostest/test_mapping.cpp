@@ -117,7 +117,6 @@ class MappingTest : public ::testing::Test {
   }
 
   ros::NodeHandle nh_;
-  ros::Subscriber update_sub_, map_sub_;
   ros::Publisher disparity_pub_;
   tf2_ros::TransformBroadcaster tf_;
   Eigen::Isometry3d T_W_C_;
@@ -126,6 +125,9 @@ class MappingTest : public ::testing::Test {
   std::vector<OccupancyUpdateConstPtr> updates_;
   std::vector<OccupancyUpdateConstPtr> depth_updates_;
   OctomapConstPtr map_;
+  // Last, so destroyed first: the spinner's threads run their callbacks until
+  // they are shut down, and the callbacks write the members above.
+  ros::Subscriber update_sub_, map_sub_;
 };
 
 TEST_F(MappingTest, UpdatesMapSaveAndDroppedImages) {
