@@ -147,7 +147,8 @@ class MapAccumulator {
   size_t dropTile(const TileIndex& tile);
   /// Sets leaves, clamped, in tiles that hold nothing (a tile back from disk).
   void insertLeaves(const std::vector<Leaf>& leaves);
-  /// The tiles changed since the last call: every tile after a load.
+  /// The tiles changed since the last call (by updates, clearBox, or leaves
+  /// prune() dropped; not the tiles dropTile() removed): every tile after a load.
   std::vector<TileIndex> takeDirtyTiles();
 
   /// Writes <directory>/<base_name>.bt and .ot, each through a temporary file
@@ -159,8 +160,10 @@ class MapAccumulator {
 
  private:
   void applyThresholds();
-  /// Adds the blocks that the leaf of @p key at @p depth spans to @p blocks (packed BlockIndex).
-  void insertBlocksOf(const octomap::OcTreeKey& key, unsigned depth, std::unordered_set<uint64_t>* blocks) const;
+  /// Adds the blocks of @p edge_cells (kBlockCells, or kTileCells for tiles) that the leaf of
+  /// @p key at @p depth spans to @p blocks (packed).
+  void insertBlocksOf(const octomap::OcTreeKey& key, unsigned depth, std::unordered_set<uint64_t>* blocks,
+                      int edge_cells = kBlockCells) const;
 
   MapAccumulatorConfig config_;
   std::unique_ptr<AccumulatingOcTree> tree_;

@@ -29,8 +29,22 @@ struct ProjectedMap {
   int8_t at(int x, int y) const { return cells[static_cast<size_t>(y) * width + x]; }
 };
 
-/// The columns of @p tree's leaves that reach into [min_z_m, max_z_m], over
-/// the bounding box of those leaves (empty if there are none).
+/// One leaf's column in a projection: @p cells × @p cells map cells from
+/// global cell index (x, y), occupied or free.
+struct ProjectedLeaf {
+  long x = 0, y = 0;
+  long cells = 1;
+  int8_t value = ProjectedMap::kFree;
+};
+
+/// The columns of @p tree's leaves that reach into [min_z_m, max_z_m].
+std::vector<ProjectedLeaf> projectedLeaves(const octomap::OcTree& tree, double min_z_m, double max_z_m);
+
+/// The grid of @p sets' columns (of maps of @p resolution_m cells) over their
+/// bounding box, occupied over free over unknown (empty if there are none).
+ProjectedMap composeProjection(double resolution_m, const std::vector<const std::vector<ProjectedLeaf>*>& sets);
+
+/// composeProjection() of @p tree's projectedLeaves().
 ProjectedMap projectOccupancy(const octomap::OcTree& tree, double min_z_m, double max_z_m);
 
 }  // namespace stereo_occupancy

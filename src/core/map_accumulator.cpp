@@ -68,19 +68,19 @@ int tileOfBlock(int b) { return floorDiv(b, MapAccumulator::kTileCells / MapAccu
 
 }  // namespace
 
-void MapAccumulator::insertBlocksOf(const octomap::OcTreeKey& key, unsigned depth,
-                                    std::unordered_set<uint64_t>* blocks) const {
+void MapAccumulator::insertBlocksOf(const octomap::OcTreeKey& key, unsigned depth, std::unordered_set<uint64_t>* blocks,
+                                    int edge_cells) const {
   // A coarse leaf: each block it spans.
   const int offset = static_cast<int>(tree_->coordToKey(0.0));
   const int side = 1 << (tree_->getTreeDepth() - depth);
   const int mask = ~(side - 1);  // the leaf's lowest key
-  const int step = std::min(side, kBlockCells);
+  const int step = std::min(side, edge_cells);
   for (int dz = 0; dz < side; dz += step)
     for (int dy = 0; dy < side; dy += step)
       for (int dx = 0; dx < side; dx += step)
-        blocks->insert(packBlock(Eigen::Vector3i(blockOf((key[0] & mask) + dx - offset),
-                                                 blockOf((key[1] & mask) + dy - offset),
-                                                 blockOf((key[2] & mask) + dz - offset))));
+        blocks->insert(packBlock(Eigen::Vector3i(floorDiv((key[0] & mask) + dx - offset, edge_cells),
+                                                 floorDiv((key[1] & mask) + dy - offset, edge_cells),
+                                                 floorDiv((key[2] & mask) + dz - offset, edge_cells))));
 }
 
 std::vector<MapAccumulator::BlockIndex> MapAccumulator::takeChangedBlocks(bool* all) {
@@ -281,12 +281,13 @@ size_t MapAccumulator::prune() {
     const Eigen::Array3d p(it.getX(), it.getY(), it.getZ());
     return (p >= lo).all() && (p <= hi).all();
   };
-  // The dropped leaves' blocks change (the outputs delete them); the rest do not.
+  // The dropped leaves' blocks and tiles change (the outputs delete them); the rest do not.
   size_t outside = 0;
   for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it) {
     if (inside(it)) continue;
     ++outside;
     if (!all_changed_) insertBlocksOf(it.getKey(), it.getDepth(), &changed_blocks_);
+    insertBlocksOf(it.getKey(), it.getDepth(), &dirty_tiles_, kTileCells);
   }
   if (outside == 0) return 0;
   auto kept = std::make_unique<AccumulatingOcTree>(config_.resolution_m);

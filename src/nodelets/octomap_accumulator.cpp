@@ -47,6 +47,12 @@ class OctomapAccumulator : public nodelet::Nodelet {
   void updateCallback(const ros::MessageEvent<const OccupancyUpdate>& event);
   void publish(const ros::TimerEvent&);
   void publishOutputs();  ///< publish()'s work; may throw
+  /// The whole-map outputs (octree, cloud, projection), built from snapshot_ outside mutex_.
+  void publishWholeMap();
+  /// Brings snapshot_ up to date (the changed tiles' leaves copied under
+  /// mutex_, encoded outside it) and returns the map's header. Requires
+  /// snapshot_mutex_, not mutex_.
+  std_msgs::Header refreshSnapshot();
   /// The marker arrays of the blocks changed since the last publish; requires mutex_.
   void publishChangedBlocks(const octomap::OcTree& tree, const std_msgs::Header& header);
   bool saveMap(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response);
@@ -76,6 +82,11 @@ class OctomapAccumulator : public nodelet::Nodelet {
   bool changed_since_publish_ = true;  ///< the map changed since the markers went out
   bool full_changed_ = true;           ///< ... since the whole-map outputs went out
   ros::WallTime last_full_publish_;    ///< when they went out; zero: never
+
+  /// Guards snapshot_; taken before mutex_ when both are: the whole-map
+  /// outputs are built from it while the fusion goes on.
+  std::mutex snapshot_mutex_;
+  std::unique_ptr<MapSnapshot> snapshot_;
 
   ros::Subscriber update_sub_;
   ros::Publisher octomap_pub_, octomap_full_pub_, markers_pub_, free_markers_pub_, cloud_pub_, projected_pub_;
@@ -110,6 +121,12 @@ void OctomapAccumulator::onInit() {
   }
 
   if (!params_.save_dir.empty()) openDatabase();
+  MapSnapshotConfig snapshot;
+  snapshot.resolution_m = params_.map.resolution_m;
+  snapshot.occupancy_threshold_prob = params_.map.occupancy_threshold_prob;
+  snapshot.projection_min_z_m = params_.projection_min_z_m;
+  snapshot.projection_max_z_m = params_.projection_max_z_m;
+  snapshot_ = std::make_unique<MapSnapshot>(snapshot);
 
   // octomap_server's names and types, latched as there.
   octomap_pub_ = nh.advertise<Octomap>("octomap_binary", 1, /*latch=*/true);
@@ -206,7 +223,7 @@ void OctomapAccumulator::updateCallback(const ros::MessageEvent<const OccupancyU
   // Any node may publish on this topic: MapFusion checks everything before
   // the map is touched, and nothing may leave the callback (it would end the manager).
   const OccupancyUpdateConstPtr& msg = event.getConstMessage();
-  std::lock_guard<std::mutex> lock(mutex_);
+  std::unique_lock<std::mutex> lock(mutex_);
   const bool frame_chosen = !fusion_->frameId().empty();
   const uint64_t lost_before = fusion_->counters().lost;
   std::string why;
@@ -239,6 +256,9 @@ void OctomapAccumulator::updateCallback(const ros::MessageEvent<const OccupancyU
   if (window_fusion_ms_.size() < kMaxTimings) window_fusion_ms_.push_back(last_fusion_ms_);
   if (!frame_chosen) NODELET_INFO("the map is in frame '%s' (the first update's)", fusion_->frameId().c_str());
   changed_since_publish_ = full_changed_ = true;
+  const bool trim = fusion_->mission().takeFreedMemory();
+  lock.unlock();
+  if (trim) MissionMap::trimHeap();  // the tiles that went to the database: outside the lock, the fusion goes on
 }
 
 std_msgs::Header OctomapAccumulator::mapHeader() const {
@@ -262,42 +282,64 @@ void OctomapAccumulator::publishOutputs() {
   const auto wanted = [](const ros::Publisher& pub) { return pub.getNumSubscribers() > 0; };
   const bool anyone = wanted(octomap_pub_) || wanted(octomap_full_pub_) || wanted(markers_pub_) ||
                       wanted(free_markers_pub_) || wanted(cloud_pub_) || wanted(projected_pub_);
-  std::lock_guard<std::mutex> lock(mutex_);
-  if (!anyone) {
-    fusion_->markAllChanged();  // no changes kept for nobody: the next subscriber gets the whole map
-    return;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!anyone) {
+      fusion_->markAllChanged();  // no changes kept for nobody: the next subscriber gets the whole map
+      return;
+    }
+    if (fusion_->frameId().empty()) return;
+    // The whole map at most every full_map_period_s, the changed blocks at
+    // each publish: a large map's octree and cloud would cost more than its changes.
+    const ros::WallTime now = ros::WallTime::now();
+    const bool full_due = full_changed_ && (last_full_publish_.isZero() || now < last_full_publish_ ||
+                                            (now - last_full_publish_).toSec() >= params_.full_map_period_s);
+    if (!changed_since_publish_ && !full_due) return;
+    changed_since_publish_ = false;
+    publishChangedBlocks(fusion_->map().tree(), mapHeader());
+    if (!full_due) return;
+    full_changed_ = false;
+    last_full_publish_ = now;
   }
-  if (fusion_->frameId().empty()) return;
-  // The whole map at most every full_map_period_s, the changed blocks at
-  // each publish: a large map's octree and cloud would cost more than its changes.
-  const ros::WallTime now = ros::WallTime::now();
-  const bool full_due = full_changed_ && (last_full_publish_.isZero() || now < last_full_publish_ ||
-                                          (now - last_full_publish_).toSec() >= params_.full_map_period_s);
-  if (!changed_since_publish_ && !full_due) return;
-  changed_since_publish_ = false;
-  const std_msgs::Header header = mapHeader();
-  const octomap::OcTree& tree = fusion_->map().tree();
-  publishChangedBlocks(tree, header);
-  if (!full_due) return;
-  full_changed_ = false;
-  last_full_publish_ = now;
+  publishWholeMap();
+}
+
+void OctomapAccumulator::publishWholeMap() {
+  const auto wanted = [](const ros::Publisher& pub) { return pub.getNumSubscribers() > 0; };
+  if (!wanted(octomap_pub_) && !wanted(octomap_full_pub_) && !wanted(cloud_pub_) && !wanted(projected_pub_)) return;
+  std::lock_guard<std::mutex> lock(snapshot_mutex_);
+  snapshot_->setKeepFull(wanted(octomap_full_pub_));
+  const std_msgs::Header header = refreshSnapshot();
   for (const bool binary : {true, false}) {
     const ros::Publisher& pub = binary ? octomap_pub_ : octomap_full_pub_;
     if (!wanted(pub)) continue;
     auto msg = boost::make_shared<Octomap>();
-    toMsg(tree, binary, header, msg.get());
+    toMsg(*snapshot_, binary, header, msg.get());
     pub.publish(msg);
   }
   if (wanted(cloud_pub_)) {
     auto msg = boost::make_shared<sensor_msgs::PointCloud2>();
-    occupiedCellCloud(tree, header, msg.get());
+    occupiedCellCloud(*snapshot_, header, msg.get());
     cloud_pub_.publish(msg);
   }
   if (wanted(projected_pub_)) {
     auto msg = boost::make_shared<nav_msgs::OccupancyGrid>();
-    toMsg(projectOccupancy(tree, params_.projection_min_z_m, params_.projection_max_z_m), header, msg.get());
+    toMsg(snapshot_->projection(), header, msg.get());
     projected_pub_.publish(msg);
   }
+}
+
+std_msgs::Header OctomapAccumulator::refreshSnapshot() {
+  std::vector<TileContent> changes;
+  bool whole_map = false;
+  std_msgs::Header header;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    changes = fusion_->mission().takeChangedTiles(snapshot_->needsWholeMap(), &whole_map);
+    header = mapHeader();
+  }
+  snapshot_->apply(changes, whole_map);
+  return header;
 }
 
 void OctomapAccumulator::publishChangedBlocks(const octomap::OcTree& tree, const std_msgs::Header& header) {
@@ -324,9 +366,11 @@ void OctomapAccumulator::publishChangedBlocks(const octomap::OcTree& tree, const
 }
 
 bool OctomapAccumulator::getMap(bool binary, GetOctomap::Request&, GetOctomap::Response& response) {
-  std::lock_guard<std::mutex> lock(mutex_);
+  std::lock_guard<std::mutex> lock(snapshot_mutex_);
   try {
-    toMsg(fusion_->map().tree(), binary, mapHeader(), &response.map);
+    if (!binary) snapshot_->setKeepFull(true);  // until a publish finds octomap_full without subscribers
+    const std_msgs::Header header = refreshSnapshot();
+    toMsg(*snapshot_, binary, header, &response.map);
   } catch (const std::exception& e) {  // nothing may leave a callback
     NODELET_ERROR("could not serialise the map for %s: %s", binary ? "octomap_binary" : "octomap_full", e.what());
     return false;

@@ -7,6 +7,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <map>
 #include <sstream>
 #include <utility>
@@ -175,19 +176,32 @@ bool viewOf(const OccupancyUpdate& msg, GridUpdateView* view, std::string* why) 
   return true;
 }
 
-void toMsg(const octomap::OcTree& tree, bool binary, const std_msgs::Header& header, Octomap* msg) {
+namespace {
+/// An Octomap message of an OcTree of @p resolution_m whose data @p write writes.
+void octomapMsg(double resolution_m, bool binary, const std_msgs::Header& header,
+                const std::function<void(std::ostream&)>& write, Octomap* msg) {
   msg->header = header;
   msg->binary = binary;
-  msg->id = tree.getTreeType();
-  msg->resolution = tree.getResolution();
+  msg->id = "OcTree";
+  msg->resolution = resolution_m;
   std::stringstream data;
-  if (binary) {
-    tree.writeBinaryData(data);
-  } else {
-    tree.writeData(data);
-  }
+  write(data);
   const std::string bytes = data.str();
   msg->data.assign(bytes.begin(), bytes.end());
+}
+}  // namespace
+
+void toMsg(const octomap::OcTree& tree, bool binary, const std_msgs::Header& header, Octomap* msg) {
+  octomapMsg(tree.getResolution(), binary, header, [&](std::ostream& out) {
+    if (binary)
+      tree.writeBinaryData(out);
+    else
+      tree.writeData(out);
+  }, msg);
+}
+
+void toMsg(const MapSnapshot& snapshot, bool binary, const std_msgs::Header& header, Octomap* msg) {
+  octomapMsg(snapshot.resolution(), binary, header, [&](std::ostream& out) { snapshot.writeData(binary, out); }, msg);
 }
 
 std::unique_ptr<octomap::OcTree> treeFromMsg(const Octomap& msg) {
@@ -345,21 +359,18 @@ void toMsg(const ProjectedMap& map, const std_msgs::Header& header, nav_msgs::Oc
   msg->data = map.cells;
 }
 
-void occupiedCellCloud(const octomap::OcTree& tree, const std_msgs::Header& header, sensor_msgs::PointCloud2* cloud) {
-  size_t n = 0;
-  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) n += tree.isNodeOccupied(*it);
+void occupiedCellCloud(const MapSnapshot& snapshot, const std_msgs::Header& header, sensor_msgs::PointCloud2* cloud) {
   cloud->header = header;
   sensor_msgs::PointCloud2Modifier modifier(*cloud);
   modifier.setPointCloud2FieldsByString(1, "xyz");
-  modifier.resize(n);
+  modifier.resize(snapshot.numOccupied());
   sensor_msgs::PointCloud2Iterator<float> x(*cloud, "x"), y(*cloud, "y"), z(*cloud, "z");
-  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
-    if (!tree.isNodeOccupied(*it)) continue;
-    *x = static_cast<float>(it.getX());
-    *y = static_cast<float>(it.getY());
-    *z = static_cast<float>(it.getZ());
+  snapshot.forEachOccupiedCentre([&](const octomap::point3d& p) {
+    *x = p.x();
+    *y = p.y();
+    *z = p.z();
     ++x, ++y, ++z;
-  }
+  });
 }
 
 void occupiedCellCloud(const LocalGrid& grid, const std_msgs::Header& header, sensor_msgs::PointCloud2* cloud) {

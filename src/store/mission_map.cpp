@@ -13,6 +13,7 @@
 
 #include "stereo_occupancy/accumulating_octree.h"
 #include "stereo_occupancy/octomap_io.h"
+#include "tile_tree_writer.h"
 
 namespace stereo_occupancy {
 
@@ -55,7 +56,7 @@ MaintainResult MissionMap::maintain() {
   if (window.isEmpty() || live_.config().max_extent_m <= 0.0) return result;
   const double slack_m = MapAccumulator::kPruneSlack * live_.config().max_extent_m;
   window = Eigen::AlignedBox3d(window.min().array() - slack_m, window.max().array() + slack_m);
-  for (const TileIndex& t : live_.takeDirtyTiles()) unsaved_.insert(TileStore::pack(t));
+  collectDirtyTiles();
   const std::vector<uint64_t> resident(resident_.begin(), resident_.end());
   for (uint64_t key : resident) {
     const TileIndex tile = TileStore::unpack(key);
@@ -64,18 +65,55 @@ MaintainResult MissionMap::maintain() {
     if (unsaved_.erase(key)) store_->put(tile, live_.tileLeaves(tile));
     if (live_.dropTile(tile) > 0) ++result.tiles_stored;
     resident_.erase(key);
+    unpublished_.insert(key);
   }
+  freed_memory_ = freed_memory_ || result.tiles_stored > 0;
+  return result;
+}
+
+bool MissionMap::takeFreedMemory() {
+  const bool freed = freed_memory_;
+  freed_memory_ = false;
+  return freed;
+}
+
+void MissionMap::trimHeap() {
 #ifdef __GLIBC__
   // A tile is ~10^5 small nodes freed at once; glibc keeps such pages
   // unless asked, so the process would grow as if the map had stayed.
-  if (result.tiles_stored > 0) malloc_trim(0);
+  malloc_trim(0);
 #endif
-  return result;
+}
+
+void MissionMap::collectDirtyTiles() {
+  for (const TileIndex& t : live_.takeDirtyTiles()) {
+    if (store_) unsaved_.insert(TileStore::pack(t));
+    unpublished_.insert(TileStore::pack(t));
+  }
+}
+
+std::vector<TileContent> MissionMap::takeChangedTiles(bool whole_map, bool* whole_map_out) {
+  collectDirtyTiles();
+  *whole_map_out = whole_map || all_unpublished_;
+  std::vector<TileIndex> tiles;
+  if (*whole_map_out) {
+    tiles = live_.tiles();
+  } else {
+    for (uint64_t key : unpublished_) tiles.push_back(TileStore::unpack(key));
+  }
+  unpublished_.clear();
+  all_unpublished_ = false;
+  std::vector<TileContent> changes(tiles.size());
+  for (size_t i = 0; i < tiles.size(); ++i) {
+    changes[i].tile = tiles[i];
+    changes[i].leaves = live_.tileLeaves(tiles[i]);
+  }
+  return changes;
 }
 
 size_t MissionMap::checkpoint() {
   if (!store_) return 0;
-  for (const TileIndex& t : live_.takeDirtyTiles()) unsaved_.insert(TileStore::pack(t));
+  collectDirtyTiles();
   for (uint64_t key : unsaved_) store_->put(TileStore::unpack(key), live_.tileLeaves(TileStore::unpack(key)));
   const size_t queued = unsaved_.size();
   unsaved_.clear();
@@ -86,6 +124,8 @@ void MissionMap::reset() {
   live_.reset();
   resident_.clear();
   unsaved_.clear();
+  unpublished_.clear();
+  all_unpublished_ = true;
   if (store_) store_->clear();
 }
 
@@ -93,6 +133,8 @@ void MissionMap::load(const std::string& path) {
   live_.load(path);
   resident_.clear();
   unsaved_.clear();
+  unpublished_.clear();
+  all_unpublished_ = true;
   if (!store_) return;
   for (const TileIndex& t : live_.tiles()) resident_.insert(TileStore::pack(t));
 }
@@ -114,109 +156,29 @@ std::vector<std::string> MissionMap::saveStore(TileStore& store, const std::stri
 
 namespace {
 
-/// writeStore's walk: the octree's nodes above the tiles, in octomap's
-/// pre-order, each tile's subtree from its row.
-class StoreWriter {
- public:
-  StoreWriter(const TileStore& store, bool full, double occupancy_threshold_prob)
-      : store_(store), full_(full), rows_(store.rows()), threshold_prob_(occupancy_threshold_prob) {
-    octomap::OcTree probe(store.resolution());  // the threshold as the tree keeps it
-    probe.setOccupancyThres(occupancy_threshold_prob);
-    threshold_log_ = probe.getOccupancyThresLog();
+/// The subtree of a tile row's tile (@p bytes: TileStore::rowData) as
+/// @p full asks: the row's part after the path, or its binary encoding.
+void writeTileRow(const TileRow& row, const std::string& bytes, bool full, double resolution_m,
+                  double occupancy_threshold_prob, std::ostream& out) {
+  const size_t path_bytes = MapAccumulator::kTileDepth * TileStore::kRowNodeBytes;
+  if (full) {  // the row is the tile's pre-order after its path
+    out.write(bytes.data() + path_bytes, static_cast<std::streamsize>(bytes.size() - path_bytes));
+    return;
   }
-
-  bool write(std::ostream& out) {
-    // As AbstractOcTree::write and writeBinaryConst write their headers.
-    out << (full_ ? "# Octomap OcTree file" : "# Octomap OcTree binary file")
-        << "\n# (feel free to add / change comments, but leave the first line as it is!)\n#\n";
-    out << "id OcTree" << std::endl;
-    std::vector<size_t> all(rows_.size());
-    for (size_t i = 0; i < all.size(); ++i) all[i] = i;
-    out << "size " << (rows_.empty() ? 0 : countNodes(0, all)) << std::endl;
-    out << "res " << store_.resolution() << std::endl;
-    out << "data" << std::endl;
-    if (!rows_.empty()) writeNode(0, all, out);
-    return static_cast<bool>(out);
-  }
-
- private:
-  /// Child index (octomap::computeChildIdx) of @p row's tile at node depth @p depth.
-  unsigned childOf(const TileRow& row, unsigned depth) const {
-    unsigned idx = 0;
-    for (int a = 0; a < 3; ++a) {
-      const unsigned key = static_cast<unsigned>(row.tile[a] + (1 << MapAccumulator::kTileDepth) / 2);
-      if (key & (1u << (MapAccumulator::kTileDepth - 1 - depth))) idx |= 1u << a;
-    }
-    return idx;
-  }
-  std::array<std::vector<size_t>, 8> split(unsigned depth, const std::vector<size_t>& rows) const {
-    std::array<std::vector<size_t>, 8> children;
-    for (size_t i : rows) children[childOf(rows_[i], depth)].push_back(i);
-    return children;
-  }
-  size_t countNodes(unsigned depth, const std::vector<size_t>& rows) const {
-    if (depth == MapAccumulator::kTileDepth) return rows_[rows.front()].nodes;
-    size_t n = 1;
-    for (const auto& child : split(depth, rows))
-      if (!child.empty()) n += countNodes(depth + 1, child);
-    return n;
-  }
-  void writeNode(unsigned depth, const std::vector<size_t>& rows, std::ostream& out) {
-    if (depth == MapAccumulator::kTileDepth) return writeTile(rows_[rows.front()], out);
-    const auto children = split(depth, rows);
-    if (full_) {
-      float value = -std::numeric_limits<float>::max();
-      for (size_t i : rows) value = std::max(value, rows_[i].max_log_odds);
-      out.write(reinterpret_cast<const char*>(&value), sizeof value);
-      char bits = 0;
-      for (unsigned c = 0; c < 8; ++c)
-        if (!children[c].empty()) bits = static_cast<char>(bits | (1 << c));
-      out.write(&bits, 1);
-    } else {
-      // OccupancyOcTreeBase::writeBinaryNode's two bits per child: 11 inner, 01 occupied, 10 free, 00 unknown.
-      uint16_t bits = 0;
-      for (unsigned c = 0; c < 8; ++c) {
-        if (children[c].empty()) continue;
-        const TileRow& first = rows_[children[c].front()];
-        const bool leaf = depth + 1 == MapAccumulator::kTileDepth && first.nodes == 1;
-        const unsigned code = !leaf ? 3u : first.max_log_odds >= threshold_log_ ? 2u : 1u;
-        bits = static_cast<uint16_t>(bits | (code << (2 * c)));
+  if (row.nodes == 1) return;  // a leaf: its parent's bits said all
+  octomap::OcTree tile(resolution_m);
+  tile.setOccupancyThres(occupancy_threshold_prob);
+  std::istringstream in(bytes);
+  if (!tile.readData(in)) throw std::runtime_error("a tile row is not OcTree data");
+  const octomap::OcTreeNode* node = tile.getRoot();
+  for (unsigned d = 0; d < MapAccumulator::kTileDepth; ++d)
+    for (unsigned c = 0; c < 8; ++c)
+      if (tile.nodeChildExists(node, c)) {
+        node = tile.getNodeChild(node, c);
+        break;
       }
-      const char bytes[2] = {static_cast<char>(bits & 0xff), static_cast<char>(bits >> 8)};
-      out.write(bytes, 2);
-    }
-    for (const auto& child : children)
-      if (!child.empty()) writeNode(depth + 1, child, out);
-  }
-  void writeTile(const TileRow& row, std::ostream& out) {
-    if (!store_.rowData(row.tile, &bytes_)) throw std::runtime_error("a tile row went missing");
-    const size_t path_bytes = MapAccumulator::kTileDepth * TileStore::kRowNodeBytes;
-    if (full_) {  // the row is the tile's pre-order after its path
-      out.write(bytes_.data() + path_bytes, static_cast<std::streamsize>(bytes_.size() - path_bytes));
-      return;
-    }
-    if (row.nodes == 1) return;  // a leaf: its parent's bits said all
-    octomap::OcTree tile(store_.resolution());
-    tile.setOccupancyThres(threshold_prob_);
-    std::istringstream in(bytes_);
-    if (!tile.readData(in)) throw std::runtime_error("a tile row is not OcTree data");
-    const octomap::OcTreeNode* node = tile.getRoot();
-    for (unsigned d = 0; d < MapAccumulator::kTileDepth; ++d)
-      for (unsigned c = 0; c < 8; ++c)
-        if (tile.nodeChildExists(node, c)) {
-          node = tile.getNodeChild(node, c);
-          break;
-        }
-    tile.writeBinaryNode(out, node);
-  }
-
-  const TileStore& store_;
-  bool full_;
-  std::vector<TileRow> rows_;
-  double threshold_prob_;
-  float threshold_log_ = 0.0f;
-  std::string bytes_;  ///< the current tile's row
-};
+  tile.writeBinaryNode(out, node);
+}
 
 }  // namespace
 
@@ -224,8 +186,23 @@ void MissionMap::writeStore(const TileStore& store, const std::string& path, dou
   const bool full = path.size() > 3 && path.compare(path.size() - 3, 3, ".ot") == 0;
   const bool binary = path.size() > 3 && path.compare(path.size() - 3, 3, ".bt") == 0;
   if (!full && !binary) throw std::runtime_error("'" + path + "': the map file must end in .ot or .bt");
-  StoreWriter writer(store, full, occupancy_threshold_prob);
-  writeFileAtomically(path, [&](std::ostream& out) { return writer.write(out); });
+  std::string bytes;  // the current tile's row
+  const TileTreeWriter writer(store.rows(), full, thresholdLog(store.resolution(), occupancy_threshold_prob),
+                              [&](const TileRow& row, std::ostream& out) {
+                                if (!store.rowData(row.tile, &bytes)) throw std::runtime_error("a tile row went missing");
+                                writeTileRow(row, bytes, full, store.resolution(), occupancy_threshold_prob, out);
+                              });
+  writeFileAtomically(path, [&](std::ostream& out) {
+    // As AbstractOcTree::write and writeBinaryConst write their headers.
+    out << (full ? "# Octomap OcTree file" : "# Octomap OcTree binary file")
+        << "\n# (feel free to add / change comments, but leave the first line as it is!)\n#\n";
+    out << "id OcTree" << std::endl;
+    out << "size " << writer.numNodes() << std::endl;
+    out << "res " << store.resolution() << std::endl;
+    out << "data" << std::endl;
+    writer.writeData(out);
+    return static_cast<bool>(out);
+  });
 }
 
 std::unique_ptr<octomap::OcTree> MissionMap::assemble(const TileStore& store, const Eigen::AlignedBox3d& W_box) {

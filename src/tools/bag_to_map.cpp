@@ -151,6 +151,7 @@ int main(int argc, char** argv) {
           ++fusion_refused;
           std::cerr << "\nbag_to_map: the map refused an update: " << why << std::endl;
         }
+        if (fusion.mission().takeFreedMemory()) so::MissionMap::trimHeap();
         if (!update && result.outcome == so::FrameOutcome::kRefused)
           std::cerr << "\nbag_to_map: refused an image: " << result.why << std::endl;
         mapping_ms += std::chrono::duration<double, std::milli>(t1 - t0).count();

@@ -22,6 +22,7 @@
 #include "stereo_occupancy/projected_map.h"
 #include "stereo_occupancy/ros/parameters.h"
 #include "stereo_occupancy/stereo_camera_model.h"
+#include "stereo_occupancy/store/map_snapshot.h"
 
 namespace stereo_occupancy {
 
@@ -68,6 +69,10 @@ bool viewOf(const OccupancyUpdate& msg, GridUpdateView* view, std::string* why);
 /// content) or full (.ot content, log-odds).
 void toMsg(const octomap::OcTree& tree, bool binary, const std_msgs::Header& header, Octomap* msg);
 
+/// The same message from a MapSnapshot of the tree, byte for byte.
+/// @throws std::logic_error for a full message of a snapshot without full data.
+void toMsg(const MapSnapshot& snapshot, bool binary, const std_msgs::Header& header, Octomap* msg);
+
 /// The tree a toMsg() message carries (binary or full), or null if it is not
 /// an OcTree's or its data cannot be read.
 std::unique_ptr<octomap::OcTree> treeFromMsg(const Octomap& msg);
@@ -93,8 +98,8 @@ void freeBlockMarkers(const octomap::OcTree& tree, const std::vector<Eigen::Vect
 /// The projected map as a nav_msgs/OccupancyGrid in the header's frame (z = 0).
 void toMsg(const ProjectedMap& map, const std_msgs::Header& header, nav_msgs::OccupancyGrid* msg);
 
-/// Centres of the occupied leaves as an XYZ cloud.
-void occupiedCellCloud(const octomap::OcTree& tree, const std_msgs::Header& header, sensor_msgs::PointCloud2* cloud);
+/// Centres of the map's occupied leaves as an XYZ cloud.
+void occupiedCellCloud(const MapSnapshot& snapshot, const std_msgs::Header& header, sensor_msgs::PointCloud2* cloud);
 
 /// Centres of a local grid's cells with positive log-odds as an XYZ + intensity (log-odds) cloud.
 void occupiedCellCloud(const LocalGrid& grid, const std_msgs::Header& header, sensor_msgs::PointCloud2* cloud);

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "stereo_occupancy/map_accumulator.h"
+#include "stereo_occupancy/store/map_snapshot.h"
 #include "stereo_occupancy/store/tile_store.h"
 
 namespace stereo_occupancy {
@@ -45,12 +46,24 @@ class MissionMap {
   /// the update reaches.
   bool integrate(const GridUpdateView& update, std::string* why = nullptr);
   /// Moves the tiles outside the window (MapAccumulator::keptBox, grown by
-  /// kPruneSlack · max_extent_m) to the store; without one, prunes.
+  /// kPruneSlack · max_extent_m) to the store; without one, prunes. See takeFreedMemory().
   MaintainResult maintain();
+  /// True once after maintain() moved tiles to the store: their memory is
+  /// free, but the allocator keeps it from the system until trimHeap().
+  bool takeFreedMemory();
+  /// Gives the allocator's free pages back to the system (glibc's
+  /// malloc_trim). It walks the heap: call it outside the lock that
+  /// serialises the map.
+  static void trimHeap();
   /// Queues the live tiles changed since the last checkpoint in the store
   /// (its thread writes them): a crash then loses only what came after.
   /// Returns how many tiles were queued; 0 without a store.
   size_t checkpoint();
+  /// The live tiles changed since the last call, each with its leaves (none:
+  /// the tile left the live map), for a MapSnapshot; costs what changed.
+  /// @p whole_map, or after a reset or load: every live tile, and
+  /// @p *whole_map_out is true.
+  std::vector<TileContent> takeChangedTiles(bool whole_map, bool* whole_map_out);
   /// Empties the map, the store's tiles too.
   void reset();
   /// MapAccumulator::load; the loaded tiles replace the store's at the next checkpoint().
@@ -86,6 +99,11 @@ class MissionMap {
   std::shared_ptr<TileStore> store_;
   std::unordered_set<uint64_t> resident_;  ///< tiles the live map holds (not the store's copy)
   std::unordered_set<uint64_t> unsaved_;   ///< resident tiles changed since their last checkpoint
+  std::unordered_set<uint64_t> unpublished_;  ///< tiles changed or gone since takeChangedTiles()
+  bool all_unpublished_ = true;               ///< the next takeChangedTiles() gives the whole map
+  bool freed_memory_ = false;                 ///< maintain() moved tiles since takeFreedMemory()
+  /// Moves the live map's dirty tiles to unsaved_ (with a store) and unpublished_.
+  void collectDirtyTiles();
 };
 
 }  // namespace stereo_occupancy
