@@ -24,13 +24,7 @@ MapSnapshot::Tile MapSnapshot::encode(const TileContent& content) const {
   tree.setOccupancyThres(config_.occupancy_threshold_prob);
   for (const auto& leaf : content.leaves) tree.setLeaf(leaf.key, leaf.depth, leaf.log_odds);
   tree.updateInnerOccupancy();
-  const octomap::OcTreeNode* node = tree.getRoot();
-  for (unsigned d = 0; d < MapAccumulator::kTileDepth; ++d)
-    for (unsigned c = 0; c < 8; ++c)
-      if (tree.nodeChildExists(node, c)) {
-        node = tree.getNodeChild(node, c);
-        break;
-      }
+  const octomap::OcTreeNode* node = tileNode(tree);
   Tile tile;
   tile.row.tile = content.tile;
   tile.row.nodes = tree.calcNumNodes() - MapAccumulator::kTileDepth;

@@ -170,14 +170,7 @@ void writeTileRow(const TileRow& row, const std::string& bytes, bool full, doubl
   tile.setOccupancyThres(occupancy_threshold_prob);
   std::istringstream in(bytes);
   if (!tile.readData(in)) throw std::runtime_error("a tile row is not OcTree data");
-  const octomap::OcTreeNode* node = tile.getRoot();
-  for (unsigned d = 0; d < MapAccumulator::kTileDepth; ++d)
-    for (unsigned c = 0; c < 8; ++c)
-      if (tile.nodeChildExists(node, c)) {
-        node = tile.getNodeChild(node, c);
-        break;
-      }
-  tile.writeBinaryNode(out, node);
+  tile.writeBinaryNode(out, tileNode(tile));
 }
 
 }  // namespace

@@ -19,6 +19,17 @@ unsigned childOf(const TileRow& row, unsigned depth) {
 }
 }  // namespace
 
+const octomap::OcTreeNode* tileNode(const octomap::OcTree& tree) {
+  const octomap::OcTreeNode* node = tree.getRoot();
+  for (unsigned d = 0; d < MapAccumulator::kTileDepth; ++d)
+    for (unsigned c = 0; c < 8; ++c)
+      if (tree.nodeChildExists(node, c)) {
+        node = tree.getNodeChild(node, c);
+        break;
+      }
+  return node;
+}
+
 float thresholdLog(double resolution_m, double prob) {
   octomap::OcTree probe(resolution_m);
   probe.setOccupancyThres(prob);

@@ -10,6 +10,8 @@
 #include <ostream>
 #include <vector>
 
+#include <octomap/OcTree.h>
+
 #include "stereo_occupancy/store/tile_store.h"
 
 namespace stereo_occupancy {
@@ -36,6 +38,9 @@ class TileTreeWriter {
   float threshold_log_;
   WriteTile write_tile_;
 };
+
+/// The node at depth kTileDepth of a tree that holds one tile (TileStore rows, MapSnapshot).
+const octomap::OcTreeNode* tileNode(const octomap::OcTree& tree);
 
 /// The occupancy threshold @p prob in log-odds as an OcTree keeps it.
 float thresholdLog(double resolution_m, double prob);
