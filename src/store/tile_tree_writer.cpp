@@ -45,12 +45,13 @@ std::array<std::vector<size_t>, 8> TileTreeWriter::split(unsigned depth, const s
   return children;
 }
 
-size_t TileTreeWriter::numNodes() const {
-  if (rows_.empty()) return 0;
+std::vector<size_t> TileTreeWriter::allRows() const {
   std::vector<size_t> all(rows_.size());
   for (size_t i = 0; i < all.size(); ++i) all[i] = i;
-  return countNodes(0, all);
+  return all;
 }
+
+size_t TileTreeWriter::numNodes() const { return rows_.empty() ? 0 : countNodes(0, allRows()); }
 
 size_t TileTreeWriter::countNodes(unsigned depth, const std::vector<size_t>& rows) const {
   if (depth == MapAccumulator::kTileDepth) return rows_[rows.front()].nodes;
@@ -61,10 +62,7 @@ size_t TileTreeWriter::countNodes(unsigned depth, const std::vector<size_t>& row
 }
 
 void TileTreeWriter::writeData(std::ostream& out) const {
-  if (rows_.empty()) return;
-  std::vector<size_t> all(rows_.size());
-  for (size_t i = 0; i < all.size(); ++i) all[i] = i;
-  writeNode(0, all, out);
+  if (!rows_.empty()) writeNode(0, allRows(), out);
 }
 
 void TileTreeWriter::writeNode(unsigned depth, const std::vector<size_t>& rows, std::ostream& out) const {

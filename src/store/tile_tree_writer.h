@@ -29,6 +29,7 @@ class TileTreeWriter {
   void writeData(std::ostream& out) const;
 
  private:
+  std::vector<size_t> allRows() const;  ///< 0 .. rows_.size() - 1
   std::array<std::vector<size_t>, 8> split(unsigned depth, const std::vector<size_t>& rows) const;
   size_t countNodes(unsigned depth, const std::vector<size_t>& rows) const;
   void writeNode(unsigned depth, const std::vector<size_t>& rows, std::ostream& out) const;
