@@ -10,6 +10,7 @@
 #include <functional>
 #include <map>
 #include <sstream>
+#include <streambuf>
 #include <utility>
 
 #include "stereo_occupancy/map_accumulator.h"
@@ -177,22 +178,47 @@ bool viewOf(const OccupancyUpdate& msg, GridUpdateView* view, std::string* why) 
 }
 
 namespace {
-/// An Octomap message of an OcTree of @p resolution_m whose data @p write writes.
-void octomapMsg(double resolution_m, bool binary, const std_msgs::Header& header,
+/// An output stream buffer that appends to a message's byte vector: the
+/// octree's data is written once, into the message, with no string between.
+class AppendToBytes : public std::streambuf {
+ public:
+  using Bytes = Octomap::_data_type;
+  explicit AppendToBytes(Bytes* bytes) : bytes_(bytes) {}
+
+ protected:
+  int_type overflow(int_type c) override {
+    if (!traits_type::eq_int_type(c, traits_type::eof())) bytes_->push_back(static_cast<Bytes::value_type>(c));
+    return traits_type::not_eof(c);
+  }
+  std::streamsize xsputn(const char* s, std::streamsize n) override {
+    const auto* first = reinterpret_cast<const Bytes::value_type*>(s);
+    bytes_->insert(bytes_->end(), first, first + n);
+    return n;
+  }
+
+ private:
+  Bytes* bytes_;
+};
+
+/// An Octomap message of an OcTree of @p resolution_m whose data @p write
+/// writes; @p bytes_bound, if not 0, is at least the data's size (one
+/// allocation: a map's full data is its largest message).
+void octomapMsg(double resolution_m, bool binary, const std_msgs::Header& header, size_t bytes_bound,
                 const std::function<void(std::ostream&)>& write, Octomap* msg) {
   msg->header = header;
   msg->binary = binary;
   msg->id = "OcTree";
   msg->resolution = resolution_m;
-  std::stringstream data;
+  msg->data.clear();
+  msg->data.reserve(bytes_bound);
+  AppendToBytes buffer(&msg->data);
+  std::ostream data(&buffer);
   write(data);
-  const std::string bytes = data.str();
-  msg->data.assign(bytes.begin(), bytes.end());
 }
 }  // namespace
 
 void toMsg(const octomap::OcTree& tree, bool binary, const std_msgs::Header& header, Octomap* msg) {
-  octomapMsg(tree.getResolution(), binary, header, [&](std::ostream& out) {
+  octomapMsg(tree.getResolution(), binary, header, 0, [&](std::ostream& out) {
     if (binary)
       tree.writeBinaryData(out);
     else
@@ -201,7 +227,8 @@ void toMsg(const octomap::OcTree& tree, bool binary, const std_msgs::Header& hea
 }
 
 void toMsg(const MapSnapshot& snapshot, bool binary, const std_msgs::Header& header, Octomap* msg) {
-  octomapMsg(snapshot.resolution(), binary, header, [&](std::ostream& out) { snapshot.writeData(binary, out); }, msg);
+  octomapMsg(snapshot.resolution(), binary, header, snapshot.dataBytesBound(binary),
+             [&](std::ostream& out) { snapshot.writeData(binary, out); }, msg);
 }
 
 std::unique_ptr<octomap::OcTree> treeFromMsg(const Octomap& msg) {

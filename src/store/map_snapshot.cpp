@@ -72,6 +72,14 @@ void MapSnapshot::writeData(bool binary, std::ostream& out) const {
   writer.writeData(out);
 }
 
+size_t MapSnapshot::dataBytesBound(bool binary) const {
+  // Each tile's bytes, and at most kTileDepth nodes above each tile (a
+  // binary node is 2 bytes, a full one kRowNodeBytes).
+  size_t bytes = tiles_.size() * MapAccumulator::kTileDepth * TileStore::kRowNodeBytes;
+  for (const auto& kv : tiles_) bytes += (binary ? kv.second.binary : kv.second.full).size();
+  return bytes;
+}
+
 size_t MapSnapshot::numOccupied() const {
   size_t n = 0;
   for (const auto& kv : tiles_) n += kv.second.occupied.size();

@@ -192,6 +192,11 @@ TEST(Conversions, OctreeToMessageAndBack) {
   EXPECT_TRUE(msg.binary);
   EXPECT_EQ(msg.id, "OcTree");
   EXPECT_DOUBLE_EQ(msg.resolution, 0.25);
+  std::ostringstream written;
+  tree.writeBinaryData(written);
+  EXPECT_TRUE(std::string(msg.data.begin(), msg.data.end()) == written.str()) << "not the tree's bytes";
+  toMsg(tree, true, header, &msg);  // a message used again holds the new data only
+  EXPECT_EQ(msg.data.size(), written.str().size());
   const std::unique_ptr<octomap::OcTree> back_tree = treeFromMsg(msg);
   ASSERT_TRUE(back_tree);
   const octomap::OcTree& back = *back_tree;

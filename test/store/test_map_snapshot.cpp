@@ -66,6 +66,10 @@ void expectTheMapsOutputs(const MapSnapshot& snapshot, const octomap::OcTree& tr
   snapshot.writeData(/*binary=*/false, full_snapshot);
   tree.writeData(full_tree);
   EXPECT_TRUE(full_snapshot.str() == full_tree.str()) << "full data differs";
+  // The bound messages reserve by: never short, and not far over.
+  EXPECT_GE(snapshot.dataBytesBound(true), from_tree.str().size());
+  EXPECT_GE(snapshot.dataBytesBound(false), full_tree.str().size());
+  EXPECT_LE(snapshot.dataBytesBound(false), full_tree.str().size() + snapshot.numTiles() * 8 * 5);
 
   std::vector<std::array<float, 3>> centres, expected;
   snapshot.forEachOccupiedCentre([&](const octomap::point3d& p) { centres.push_back({p.x(), p.y(), p.z()}); });

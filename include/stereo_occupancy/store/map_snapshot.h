@@ -52,6 +52,8 @@ class MapSnapshot {
   /// What OcTree::writeBinaryData (@p binary) or writeData writes for the
   /// map, byte for byte. @throws std::logic_error for full data not kept.
   void writeData(bool binary, std::ostream& out) const;
+  /// At least the size of what writeData(@p binary) writes [bytes].
+  size_t dataBytesBound(bool binary) const;
   /// The occupied leaves: how many, and each one's centre.
   size_t numOccupied() const;
   void forEachOccupiedCentre(const std::function<void(const octomap::point3d&)>& f) const;
