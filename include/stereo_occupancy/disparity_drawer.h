@@ -18,6 +18,7 @@
 #include "stereo_occupancy/local_grid.h"
 #include "stereo_occupancy/ray_tracing.h"
 #include "stereo_occupancy/stereo_camera_model.h"
+#include "stereo_occupancy/worker_pool.h"
 
 namespace stereo_occupancy {
 
@@ -59,6 +60,10 @@ struct DrawingConfig {
   /// The line drawing's free-run instruction set: every level draws the same
   /// cells and values (tested); lower ones for tests and benchmarks.
   SimdLevel simd = availableSimdLevel();
+  /// Threads that draw (line algorithms) and blur one image; 0: the
+  /// machine's cores, at most WorkerPool::kMaxDefaultThreads. The grid is
+  /// the same bit for bit for any number (tested).
+  int threads = 0;
 
   /// The parameters (parameter_table.h): f(spec, member) for each, the
   /// sensor model's and the blur's included.
@@ -66,6 +71,8 @@ struct DrawingConfig {
   static void forEachParameter(Self& c, F&& f) {
     f(textParameter("algorithm", "drawing algorithm (section V, VI; bounded: beyond the paper)"), c.algorithm);
     f(numberParameter("resolution_m", "m", 0.01, 10.0, "grid cell edge c"), c.resolution_m);
+    f(numberParameter("threads", "", 0.0, 64.0, "drawing and blur threads (0: the machine's cores, at most 4)"),
+      c.threads);
     InverseSensorModelConfig::forEachParameter(c.sensor_model, f);
     BlurConfig::forEachParameter(c.blur, f);
   }
@@ -138,6 +145,7 @@ class DisparityDrawer {
   DisparityPyramid min_pyramid_;  ///< for line drawing (eq. 14) and both bounded variants
   DisparityPyramid max_pyramid_;  ///< for ray tracing (section VI-C) and both bounded variants
   DistanceDependentBlur blur_;
+  std::unique_ptr<WorkerPool> workers_;  ///< the line drawing's and the blur's; none for one thread
 };
 
 }  // namespace stereo_occupancy

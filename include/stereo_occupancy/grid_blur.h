@@ -12,6 +12,7 @@
 
 #include "stereo_occupancy/local_grid.h"
 #include "stereo_occupancy/parameter_table.h"
+#include "stereo_occupancy/worker_pool.h"
 
 namespace stereo_occupancy {
 
@@ -64,6 +65,9 @@ class DistanceDependentBlur {
 
   /// Blurs @p grid in place; W_camera is the camera centre in W [m].
   void apply(const Eigen::Vector3d& W_camera, LocalGrid* grid);
+  /// Blurs with @p pool's workers (null: on the calling thread), the same
+  /// bit for bit for any number: each row's sums are its own.
+  void setWorkers(WorkerPool* pool) { pool_ = pool; }
 
   /// Normalised 1D kernel of rounded-σ index q (σ = q · sigma_step_cells cells), radius ceil(truncate·σ).
   const std::vector<float>& kernel(int q);
@@ -81,7 +85,7 @@ class DistanceDependentBlur {
   /// One separable pass along y (axis 1) or z (axis 2): out = in * kernel
   /// over the rows of @p out_extent, reading only the rows' @p in_extent.
   void crossPass(int axis, const LocalGrid& grid, const std::vector<Extent>& in_extent, const float* in,
-                 const std::vector<Extent>& out_extent, float* out) const;
+                 const std::vector<Extent>& out_extent, float* out);
   const float* weights(int q) const { return &weights_[static_cast<size_t>(q) * (2 * radius_ + 1)]; }
 
   /// The rounded σ of a cell at squared distance r2 from the camera, in
@@ -113,9 +117,13 @@ class DistanceDependentBlur {
   /// The pass along x, from the grid into buffer_b_.
   void passAlongX(const LocalGrid& grid);
   /// The result, buffer_b_, into the grid.
-  void writeBack(LocalGrid* grid) const;
+  void writeBack(LocalGrid* grid);
+  /// Calls f(r_begin, r_end, worker) for parts of the rows [0, rows) on the workers.
+  template <typename F>
+  void forRows(int rows, const F& f);
 
   BlurConfig config_;
+  WorkerPool* pool_ = nullptr;
   std::vector<std::vector<float>> kernels_;
   int radius_ = 0;              ///< largest kernel radius in the grid [cells]
   std::vector<float> weights_;  ///< per q: its kernel padded with zeros to radius_
@@ -124,7 +132,7 @@ class DistanceDependentBlur {
   std::vector<KernelRun> runs_;     ///< per row, over its final extent
   std::vector<uint32_t> row_runs_;  ///< row r's runs are runs_[row_runs_[r] .. row_runs_[r + 1])
   std::vector<double> thresholds_;  ///< per q: the smallest r² whose rounded σ is q [m²]
-  std::vector<float> scratch_;
+  std::vector<std::vector<float>> scratch_;  ///< a row's input, per worker
   std::vector<float> buffer_a_;
   std::vector<float> buffer_b_;
 };

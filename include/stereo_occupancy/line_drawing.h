@@ -10,12 +10,14 @@
 
 #include <cstdint>
 #include <limits>
+#include <vector>
 
 #include "stereo_occupancy/disparity_pyramid.h"
 #include "stereo_occupancy/draw_statistics.h"
 #include "stereo_occupancy/inverse_sensor_model.h"
 #include "stereo_occupancy/local_grid.h"
 #include "stereo_occupancy/stereo_camera_model.h"
+#include "stereo_occupancy/worker_pool.h"
 
 namespace stereo_occupancy {
 
@@ -31,7 +33,8 @@ const char* toString(SimdLevel level);
 SimdLevel availableSimdLevel();
 
 /// Draws disparity images into a LocalGrid by line drawing. Holds references
-/// to the camera, the lookup tables and the grid; not thread-safe.
+/// to the camera, the lookup tables and the grid; not thread-safe (but it
+/// may draw one image on several threads: setWorkers()).
 class LineDrawer {
  public:
   /// @param simd the free run's instruction set; above availableSimdLevel() the best available is used.
@@ -40,16 +43,25 @@ class LineDrawer {
 
   /// The instruction set the free runs use.
   SimdLevel simdLevel() const { return simd_; }
+  /// Draws each image with @p pool's workers (null: on the calling thread).
+  /// The grid is the same bit for bit for any number of workers: each draws
+  /// its share of the blocks into a grid of its own, and a cell keeps the
+  /// largest value (obstacle priority does not depend on the order).
+  void setWorkers(WorkerPool* pool) { pool_ = pool; }
+  /// Grids of more cells are drawn on one thread (a worker's grid would cost too much memory).
+  static constexpr size_t kMaxSharedGridCells = size_t{16} << 20;
+  /// Pyramid blocks per worker a pyramid's descent is split into: enough to share the work evenly.
+  static constexpr int kPartsPerWorker = 16;
 
   /// Section V-A: one line per valid pixel of a CV_32FC1 disparity image.
   void drawImage(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
-                 DrawStatistics* stats) const;
+                 DrawStatistics* stats);
 
   /// Section VI-B: recursive descent through a min-disparity pyramid (eq. 14)
   /// from its top level; a pixel is drawn at level i when its disparity's
   /// level (eq. 13) is >= i, or when i is the lowest level (eq. 15 below 0).
   void drawPyramid(const DisparityPyramid& min_pyramid, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
-                   DrawStatistics* stats) const;
+                   DrawStatistics* stats);
 
   /// Bounded pyramidal line drawing (beyond the paper): as drawPyramid(), but
   /// a block is drawn at level i only if @p bound says its disparities, from
@@ -62,7 +74,7 @@ class LineDrawer {
   /// where its level's rays are one cell apart); its children start there.
   void drawPyramidBounded(const DisparityPyramid& min_pyramid, const DisparityPyramid& max_pyramid,
                           const DisparityBlockBound& bound, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
-                          DrawStatistics* stats) const;
+                          DrawStatistics* stats);
 
   /// Draws the ray from the camera centre along the unit direction W_dir with
   /// the profile of one measurement, over the ranges [l_begin, l_stop] up to
@@ -94,6 +106,11 @@ class LineDrawer {
                    double l_stop) const;
 
   /// What stays fixed during one (bounded or plain) descent.
+  /// A block the workers descend from, and the depth its lines start at.
+  struct PartStart {
+    int x, y;
+    double z_begin;
+  };
   struct Descent {
     const DisparityPyramid& min_pyramid;
     const DisparityPyramid* max_pyramid;  ///< bounded descent only
@@ -103,6 +120,10 @@ class LineDrawer {
     RangeProfile free_profile;  ///< of the pixels that measure no range
     double cell_f_m_px;         ///< c·f: level i's rays are one cell apart at depth c·f / 2^i
     DrawStatistics* stats;
+    /// When set, a descent that reaches split_level records the block
+    /// (a part for the workers) instead of descending into it.
+    std::vector<PartStart>* parts = nullptr;
+    int split_level = 0;
   };
   Descent descent(const DisparityPyramid& min_pyramid, const DisparityPyramid* max_pyramid,
                   const DisparityBlockBound* bound, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
@@ -113,12 +134,29 @@ class LineDrawer {
   /// Draws the line of pixel (x, y) at pyramid level i with disparity d, from depth z_begin on.
   uint64_t drawPixel(const Descent& s, int level, int x, int y, float d_px, double z_begin = 0.0) const;
   void descend(const Descent& s, int level, int x, int y) const;
+  /// Calls draw_part(part, g, stats) for each part in [0, parts) on the
+  /// workers, each with @p g on its own grid and its own counters, then
+  /// merges their grids into @p grid (which @p g is) and adds the counters to @p stats.
+  template <typename DrawPart>
+  void drawParts(size_t parts, const RayGrid& g, LocalGrid* grid, DrawStatistics* stats, const DrawPart& draw_part);
+  /// The workers that draw into @p grid: 1 without a pool or for a grid too large to copy.
+  unsigned workersFor(const LocalGrid& grid) const;
+  /// The pyramid's level whose blocks are the workers' parts: the highest
+  /// with at least kPartsPerWorker blocks per worker (or the lowest level).
+  int splitLevel(const DisparityPyramid& pyramid, unsigned workers) const;
+  /// Descends the pyramid @p s from its top on the workers; @p descend_from(s, level, x, y, z_begin) is the descent.
+  template <typename DescendFrom>
+  void drawPyramidParts(const Descent& s, LocalGrid* grid, DrawStatistics* stats, const DescendFrom& descend_from);
+  /// Each used worker grid into @p grid by max, and back to kUnknown.
+  void mergeWorkerGrids(const std::vector<char>& used, LocalGrid* grid);
   void descendBounded(const Descent& s, int level, int x, int y, double z_begin) const;
 
   const StereoCameraModel& camera_;
   const LogOddsTable& table_;
   const PyramidLevelTable& levels_;
   SimdLevel simd_;
+  WorkerPool* pool_ = nullptr;
+  std::vector<std::vector<float>> worker_grids_;  ///< worker w >= 1 draws into [w - 1]; kUnknown between images
 };
 
 }  // namespace stereo_occupancy

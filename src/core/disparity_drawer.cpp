@@ -84,6 +84,12 @@ DisparityDrawer::DisparityDrawer(const StereoCameraConfig& camera, const Drawing
       line_drawer_(camera_, table_, levels_, config.simd),
       ray_tracer_(camera_, table_, levels_),
       blur_(config.blur) {
+  const unsigned threads = config_.threads == 0 ? WorkerPool::defaultThreads() : static_cast<unsigned>(config_.threads);
+  if (threads > 1) {
+    workers_ = std::make_unique<WorkerPool>(threads);
+    line_drawer_.setWorkers(workers_.get());
+    blur_.setWorkers(workers_.get());
+  }
   const bool draws_pyramid_lines = config_.algorithm == DrawingAlgorithm::kLinePyramid ||
                                    config_.algorithm == DrawingAlgorithm::kLinePyramidBounded;
   if (draws_pyramid_lines && levels_.minLevel() < PyramidLevelTable::kLowestLevel) {

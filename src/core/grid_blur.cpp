@@ -49,19 +49,36 @@ const std::vector<float>& DistanceDependentBlur::kernel(int q) {
   return k;
 }
 
+namespace {
+/// Rows per part of a pass shared by the workers.
+constexpr int kRowsPerPart = 32;
+}  // namespace
+
+template <typename F>
+void DistanceDependentBlur::forRows(int rows, const F& f) {
+  const size_t parts = (static_cast<size_t>(rows) + kRowsPerPart - 1) / kRowsPerPart;
+  auto part = [&](size_t i, unsigned worker) {
+    const int begin = static_cast<int>(i) * kRowsPerPart;
+    f(begin, std::min(rows, begin + kRowsPerPart), worker);
+  };
+  if (pool_)
+    pool_->run(parts, part);
+  else
+    for (size_t i = 0; i < parts; ++i) part(i, 0);
+}
+
 void DistanceDependentBlur::crossPass(int axis, const LocalGrid& grid, const std::vector<Extent>& in_extent,
-                                      const float* in, const std::vector<Extent>& out_extent, float* out) const {
+                                      const float* in, const std::vector<Extent>& out_extent, float* out) {
   const int nx = grid.size().x(), ny = grid.size().y(), nz = grid.size().z();
   const int n = axis == 1 ? ny : nz;
   const int row_step = axis == 1 ? 1 : ny;  // row index step of one cell along the axis
-  for (int z = 0; z < nz; ++z) {
-    for (int y = 0; y < ny; ++y) {
-      const int r = y + ny * z;
+  forRows(ny * nz, [&](int r_begin, int r_end, unsigned) {
+    for (int r = r_begin; r < r_end; ++r) {  // r = y + ny * z
       const Extent& e = out_extent[r];
       if (e.empty()) continue;
       float* o = out + static_cast<int64_t>(nx) * r;
       std::fill(o + e.lo, o + e.hi, 0.0f);
-      const int coord = axis == 1 ? y : z;
+      const int coord = axis == 1 ? r % ny : r / ny;
       for (uint32_t k = row_runs_[r]; k < row_runs_[r + 1]; ++k) {
         const KernelRun& run = runs_[k];
         const float* w = weights(run.q);
@@ -76,7 +93,7 @@ void DistanceDependentBlur::crossPass(int axis, const LocalGrid& grid, const std
         }
       }
     }
-  }
+  });
 }
 
 namespace {
@@ -256,39 +273,45 @@ void DistanceDependentBlur::passAlongX(const LocalGrid& grid) {
   releaseIfOversized(&buffer_b_, cells);
   buffer_a_.resize(cells);  // holds values only within the extents
   buffer_b_.resize(cells);
-  scratch_.resize(nx);
-  // The row, unknown as 0, into a scratch line first.
-  for (int r = 0; r < rows; ++r) {
-    const Extent& e = extent_[1][r];
-    if (e.empty()) continue;
-    const float* row = grid.data() + static_cast<int64_t>(nx) * r;
-    const int read_lo = std::max(0, e.lo - radius_), read_hi = std::min(nx, e.hi + radius_);
-    for (int x = read_lo; x < read_hi; ++x) scratch_[x] = knownValue(row[x]);
-    float* o = buffer_b_.data() + static_cast<int64_t>(nx) * r;
-    std::fill(o + e.lo, o + e.hi, 0.0f);
-    for (uint32_t k = row_runs_[r]; k < row_runs_[r + 1]; ++k) {
-      const KernelRun& run = runs_[k];
-      const float* w = weights(run.q);
-      for (int i = -radius_; i <= radius_; ++i) {
-        const float wi = w[i + radius_];
-        const int lo = std::max({run.begin, e.lo, -i}), hi = std::min({run.end, e.hi, nx - i});
-        if (wi == 0.0f || lo >= hi) continue;
-        const float* src = scratch_.data() + i;
-        for (int x = lo; x < hi; ++x) o[x] += wi * src[x];
+  scratch_.resize(pool_ ? pool_->size() : 1);
+  for (std::vector<float>& line : scratch_) line.resize(nx);
+  forRows(rows, [&](int r_begin, int r_end, unsigned worker) {
+    float* line = scratch_[worker].data();
+    for (int r = r_begin; r < r_end; ++r) {
+      const Extent& e = extent_[1][r];
+      if (e.empty()) continue;
+      // The row, unknown as 0, into a scratch line first.
+      const float* row = grid.data() + static_cast<int64_t>(nx) * r;
+      const int read_lo = std::max(0, e.lo - radius_), read_hi = std::min(nx, e.hi + radius_);
+      for (int x = read_lo; x < read_hi; ++x) line[x] = knownValue(row[x]);
+      float* o = buffer_b_.data() + static_cast<int64_t>(nx) * r;
+      std::fill(o + e.lo, o + e.hi, 0.0f);
+      for (uint32_t k = row_runs_[r]; k < row_runs_[r + 1]; ++k) {
+        const KernelRun& run = runs_[k];
+        const float* w = weights(run.q);
+        for (int i = -radius_; i <= radius_; ++i) {
+          const float wi = w[i + radius_];
+          const int lo = std::max({run.begin, e.lo, -i}), hi = std::min({run.end, e.hi, nx - i});
+          if (wi == 0.0f || lo >= hi) continue;
+          const float* src = line + i;
+          for (int x = lo; x < hi; ++x) o[x] += wi * src[x];
+        }
       }
     }
-  }
+  });
 }
 
-void DistanceDependentBlur::writeBack(LocalGrid* grid) const {
+void DistanceDependentBlur::writeBack(LocalGrid* grid) {
   // Unknown cells stay unknown unless the blur gave them a value.
   const int nx = grid->size().x(), rows = grid->size().y() * grid->size().z();
-  for (int r = 0; r < rows; ++r) {
-    float* row = grid->data() + static_cast<int64_t>(nx) * r;
-    const float* b = buffer_b_.data() + static_cast<int64_t>(nx) * r;
-    for (int x = extent_[3][r].lo; x < extent_[3][r].hi; ++x)
-      if (row[x] != LocalGrid::kUnknown || b[x] != 0.0f) row[x] = b[x];
-  }
+  forRows(rows, [&](int r_begin, int r_end, unsigned) {
+    for (int r = r_begin; r < r_end; ++r) {
+      float* row = grid->data() + static_cast<int64_t>(nx) * r;
+      const float* b = buffer_b_.data() + static_cast<int64_t>(nx) * r;
+      for (int x = extent_[3][r].lo; x < extent_[3][r].hi; ++x)
+        if (row[x] != LocalGrid::kUnknown || b[x] != 0.0f) row[x] = b[x];
+    }
+  });
 }
 
 }  // namespace stereo_occupancy

@@ -309,24 +309,115 @@ uint64_t LineDrawer::drawRay(const RayGrid& g, const Eigen::Vector3d& W_dir, con
   return written;
 }
 
+namespace {
+/// Cells per part of the merge of the workers' grids.
+constexpr size_t kMergeChunkCells = size_t{1} << 16;
+
+void addTo(const DrawStatistics& from, DrawStatistics* to) {
+  to->coordinate_transfers += from.coordinate_transfers;
+  to->used_image_pixels += from.used_image_pixels;
+  to->grid_cells_drawn += from.grid_cells_drawn;
+  to->different_grid_cells += from.different_grid_cells;
+}
+}  // namespace
+
+template <typename DrawPart>
+void LineDrawer::drawParts(size_t parts, const RayGrid& g, LocalGrid* grid, DrawStatistics* stats,
+                           const DrawPart& draw_part) {
+  const unsigned workers = workersFor(*grid);
+  if (workers == 1) {
+    for (size_t part = 0; part < parts; ++part) draw_part(part, g, stats);
+    return;
+  }
+  if (worker_grids_.size() < workers - 1) worker_grids_.resize(workers - 1);
+  for (unsigned w = 1; w < workers; ++w) worker_grids_[w - 1].resize(grid->numCells(), LocalGrid::kUnknown);
+  std::vector<DrawStatistics> worker_stats(workers);
+  std::vector<char> used(workers, 0);  // char, not bool: each worker writes its own element
+  pool_->run(parts, [&](size_t part, unsigned w) {
+    RayGrid mine = g;
+    if (w > 0) mine.data = worker_grids_[w - 1].data();
+    used[w] = 1;
+    draw_part(part, mine, &worker_stats[w]);
+  });
+  for (const DrawStatistics& s : worker_stats) addTo(s, stats);
+  mergeWorkerGrids(used, grid);
+}
+
+unsigned LineDrawer::workersFor(const LocalGrid& grid) const {
+  return pool_ && grid.numCells() <= kMaxSharedGridCells ? pool_->size() : 1;
+}
+
+int LineDrawer::splitLevel(const DisparityPyramid& pyramid, unsigned workers) const {
+  const int64_t wanted = int64_t{kPartsPerWorker} * workers;
+  int level = pyramid.topLevel();
+  while (level > levels_.minLevel() && int64_t{pyramid.width(level)} * pyramid.height(level) < wanted) --level;
+  return level;
+}
+
+template <typename DescendFrom>
+void LineDrawer::drawPyramidParts(const Descent& s, LocalGrid* grid, DrawStatistics* stats,
+                                  const DescendFrom& descend_from) {
+  const int top = s.min_pyramid.topLevel();
+  const unsigned workers = workersFor(*grid);
+  // The levels above the split on this thread: they draw few lines and
+  // leave the blocks of the split level to the workers. Cells keep the
+  // largest value, so the grid does not depend on who drew what.
+  std::vector<PartStart> starts;
+  Descent above = s;
+  above.parts = &starts;
+  above.split_level = workers > 1 ? splitLevel(s.min_pyramid, workers) : top;
+  if (above.split_level == top) {
+    for (int y = 0; y < s.min_pyramid.height(top); ++y)
+      for (int x = 0; x < s.min_pyramid.width(top); ++x) starts.push_back({x, y, 0.0});
+  } else {
+    for (int y = 0; y < s.min_pyramid.height(top); ++y)
+      for (int x = 0; x < s.min_pyramid.width(top); ++x) descend_from(above, top, x, y, 0.0);
+  }
+  const int level = above.split_level;
+  drawParts(starts.size(), s.grid, grid, stats, [&](size_t part, const RayGrid& g, DrawStatistics* part_stats) {
+    Descent mine = s;
+    mine.grid = g;
+    mine.stats = part_stats;
+    descend_from(mine, level, starts[part].x, starts[part].y, starts[part].z_begin);
+  });
+}
+
+void LineDrawer::mergeWorkerGrids(const std::vector<char>& used, LocalGrid* grid) {
+  float* cells = grid->data();
+  const size_t n = grid->numCells();
+  pool_->run((n + kMergeChunkCells - 1) / kMergeChunkCells, [&](size_t chunk, unsigned) {
+    const size_t begin = chunk * kMergeChunkCells, end = std::min(n, begin + kMergeChunkCells);
+    for (size_t w = 1; w < used.size(); ++w) {
+      if (!used[w]) continue;
+      float* other = worker_grids_[w - 1].data();
+      for (size_t i = begin; i < end; ++i) {
+        cells[i] = std::max(cells[i], other[i]);  // obstacle priority, as drawCell
+        other[i] = LocalGrid::kUnknown;            // ready for the next image
+      }
+    }
+  });
+}
+
 void LineDrawer::drawImage(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
-                           DrawStatistics* stats) const {
+                           DrawStatistics* stats) {
   CV_Assert(disparity.type() == CV_32FC1);
   const Eigen::Matrix3d R_W_C = T_W_C.linear();
-  const RayGrid g = rayGrid(T_W_C.translation(), grid);
   stats->coordinate_transfers += 1;  // the camera centre
-  for (int y = 0; y < disparity.rows; ++y) {
-    const float* row = disparity.ptr<float>(y);
-    for (int x = 0; x < disparity.cols; ++x) {
-      const float d = row[x];
-      if (!camera_.isValidDisparity(d)) continue;  // no information
-      ++stats->used_image_pixels;
-      ++stats->coordinate_transfers;
-      const Eigen::Vector3d W_dir = R_W_C * camera_.rayThroughPixel(x, y).normalized();
-      stats->grid_cells_drawn += drawRay(g, W_dir, pixelProfile(camera_, table_, x, y, d), 0.0,
-                                         std::numeric_limits<double>::infinity());
-    }
-  }
+  // One part per image row.
+  drawParts(disparity.rows, rayGrid(T_W_C.translation(), grid), grid, stats,
+            [&](size_t y, const RayGrid& g, DrawStatistics* part_stats) {
+              const float* row = disparity.ptr<float>(static_cast<int>(y));
+              for (int x = 0; x < disparity.cols; ++x) {
+                const float d = row[x];
+                if (!camera_.isValidDisparity(d)) continue;  // no information
+                ++part_stats->used_image_pixels;
+                ++part_stats->coordinate_transfers;
+                const Eigen::Vector3d W_dir = R_W_C * camera_.rayThroughPixel(x, static_cast<double>(y)).normalized();
+                part_stats->grid_cells_drawn +=
+                    drawRay(g, W_dir, pixelProfile(camera_, table_, x, static_cast<double>(y), d), 0.0,
+                            std::numeric_limits<double>::infinity());
+              }
+            });
 }
 
 LineDrawer::Descent LineDrawer::descent(const DisparityPyramid& min_pyramid, const DisparityPyramid* max_pyramid,
@@ -356,6 +447,10 @@ uint64_t LineDrawer::drawPixel(const Descent& s, int level, int x, int y, float 
 }
 
 void LineDrawer::descend(const Descent& s, int level, int x, int y) const {
+  if (s.parts && level == s.split_level) {
+    s.parts->push_back({x, y, 0.0});
+    return;
+  }
   const float d = s.min_pyramid.at(level, x, y);
   ++s.stats->used_image_pixels;
   if (d == DisparityPyramid::kInvalidMin) return;  // the whole block is invalid
@@ -371,15 +466,18 @@ void LineDrawer::descend(const Descent& s, int level, int x, int y) const {
 }
 
 void LineDrawer::drawPyramid(const DisparityPyramid& min_pyramid, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
-                             DrawStatistics* stats) const {
+                             DrawStatistics* stats) {
   stats->coordinate_transfers += 1;  // the camera centre
   const Descent s = descent(min_pyramid, nullptr, nullptr, T_W_C, grid, stats);
-  const int top = min_pyramid.topLevel();
-  for (int y = 0; y < min_pyramid.height(top); ++y)
-    for (int x = 0; x < min_pyramid.width(top); ++x) descend(s, top, x, y);
+  drawPyramidParts(s, grid, stats,
+                   [this](const Descent& d, int level, int x, int y, double) { descend(d, level, x, y); });
 }
 
 void LineDrawer::descendBounded(const Descent& s, int level, int x, int y, double z_begin) const {
+  if (s.parts && level == s.split_level) {
+    s.parts->push_back({x, y, z_begin});
+    return;
+  }
   const float d = s.min_pyramid.at(level, x, y);
   ++s.stats->used_image_pixels;
   if (d == DisparityPyramid::kInvalidMin) return;  // the whole block is invalid
@@ -421,14 +519,14 @@ void LineDrawer::descendBounded(const Descent& s, int level, int x, int y, doubl
 
 void LineDrawer::drawPyramidBounded(const DisparityPyramid& min_pyramid, const DisparityPyramid& max_pyramid,
                                     const DisparityBlockBound& bound, const Eigen::Isometry3d& T_W_C,
-                                    LocalGrid* grid, DrawStatistics* stats) const {
+                                    LocalGrid* grid, DrawStatistics* stats) {
   CV_Assert(min_pyramid.type() == PyramidType::kMinDisparity && max_pyramid.type() == PyramidType::kMaxDisparity &&
             min_pyramid.topLevel() == max_pyramid.topLevel());
   stats->coordinate_transfers += 1;  // the camera centre
   const Descent s = descent(min_pyramid, &max_pyramid, &bound, T_W_C, grid, stats);
-  const int top = min_pyramid.topLevel();
-  for (int y = 0; y < min_pyramid.height(top); ++y)
-    for (int x = 0; x < min_pyramid.width(top); ++x) descendBounded(s, top, x, y, 0.0);
+  drawPyramidParts(s, grid, stats, [this](const Descent& d, int level, int x, int y, double z_begin) {
+    descendBounded(d, level, x, y, z_begin);
+  });
 }
 
 }  // namespace stereo_occupancy

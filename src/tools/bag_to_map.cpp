@@ -29,11 +29,12 @@ namespace {
 
 const char* kUsage =
     "usage: bag_to_map --bag FILE.bag --output PREFIX [--disparity-topic T] [--depth-topic T]\n"
-    "                  [--camera-info-topic T] [--param NAME=VALUE ...]\n"
+    "                  [--camera-info-topic T] [--threads N] [--param NAME=VALUE ...]\n"
     "Maps the bag's DisparityImage messages (or, with --depth-topic, depth images with their\n"
     "camera_info) at the poses on /tf and /tf_static, and writes PREFIX.bt and PREFIX.ot.\n"
     "Topics default to launch/mapping.launch's: /stereo/disparity and /stereo/left/camera_info.\n"
-    "--param takes the nodelets' parameter names (config/mapping.yaml), e.g. algorithm=raytrace.\n";
+    "--param takes the nodelets' parameter names (config/mapping.yaml), e.g. algorithm=raytrace.\n"
+    "--threads N: draw and blur on N threads (the mapper's threads parameter; default 0: the cores, at most 4).\n";
 
 /// Opens @p path for reading. A bag whose recording did not end cleanly
 /// (a crash, a full disk) has no index, and rosbag cannot read it until
@@ -73,6 +74,7 @@ int main(int argc, char** argv) {
       else if (a == "--disparity-topic") disparity_topic = next();
       else if (a == "--depth-topic") depth_topic = next();
       else if (a == "--camera-info-topic") info_topic = next();
+      else if (a == "--threads") values["threads"] = next();
       else if (a == "--param") {
         const std::string kv = next();
         const auto eq = kv.find('=');

@@ -11,11 +11,13 @@
 namespace stereo_occupancy {
 namespace tools {
 
-/// The default drawing configuration with @p algorithm at @p resolution_m.
-inline DrawingConfig drawingConfig(DrawingAlgorithm algorithm, double resolution_m) {
+/// The default drawing configuration with @p algorithm at @p resolution_m,
+/// on @p threads threads (benchmarks: one unless told).
+inline DrawingConfig drawingConfig(DrawingAlgorithm algorithm, double resolution_m, int threads = 1) {
   DrawingConfig config;
   config.algorithm = algorithm;
   config.resolution_m = resolution_m;
+  config.threads = threads;
   return config;
 }
 

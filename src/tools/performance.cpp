@@ -1,6 +1,6 @@
 // performance: the performance issue's figures in one run, on the Table I
 // frame (640x480, b = 0.3 m, f = 700 px, 25 m range) at 0.25 m cells, one
-// thread: each stage of the mapper's path timed alone (median and min-max of
+// thread unless --threads N: each stage of the mapper's path timed alone (median and min-max of
 // N runs), and OctoMap's insertPointCloud on the same frame for comparison.
 // A benchmark: it prints figures and asserts nothing.
 //
@@ -34,6 +34,10 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+std::string threadsText(int threads) {
+  return threads == 1 ? "one thread" : std::to_string(threads) + " threads";
+}
+
 struct Timing {
   std::vector<double> ms;  // sorted
   double median() const { return ms[ms.size() / 2]; }
@@ -64,12 +68,12 @@ Timing timeIt(int repeats, const std::function<void()>& setup, const std::functi
 /// @p pace_ms > 0 the thread sleeps that long before each frame, as a mapper
 /// between its camera's images (a 10 Hz camera: 100 ms): what the caches and
 /// the CPU's idle states cost a frame that arrives after a pause.
-int flightPath(const std::string& scenario_name, long pace_ms) {
+int flightPath(const std::string& scenario_name, long pace_ms, int threads) {
   const so::FlightScenario scenario = so::tools::scenarioNamed(scenario_name);
   std::vector<cv::Mat> images;
   for (size_t i = 0; i < scenario.T_W_B.size(); ++i) images.push_back(so::renderStereoFrame(scenario, i, 1));
   std::cout << "Flight '" << scenario_name << "': " << images.size()
-            << " frames, 640x480, 0.25 m cells, 25 m range, no blur; one thread"
+            << " frames, 640x480, 0.25 m cells, 25 m range, no blur; " << threadsText(threads)
             << (pace_ms > 0 ? "; a pause of " + std::to_string(pace_ms) + " ms before each frame" : std::string())
             << ".\nPer frame: grid preparation + pyramids + drawing + encoding, and the fusion of the update into "
                "the flight's map (the accumulator's work) [ms].\n\n"
@@ -81,6 +85,7 @@ int flightPath(const std::string& scenario_name, long pace_ms) {
     const bool mapper = algorithm == so::DrawingConfig::mapperDefaults().algorithm;
     so::DrawingConfig config = mapper ? so::DrawingConfig::mapperDefaults() : so::DrawingConfig();
     config.algorithm = algorithm;
+    config.threads = threads;
     so::DisparityDrawer drawer(scenario.camera, config);
     so::LocalGrid grid;
     so::GridUpdate update;
@@ -119,6 +124,7 @@ int run(int argc, char** argv) {
   int repeat = 21;
   std::string only, scenario_name, flight;
   long frame = 0, pace_ms = 0;
+  int threads = 1;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--repeat") {
@@ -133,17 +139,20 @@ int run(int argc, char** argv) {
       flight = so::tools::nextValue(argc, argv, &i);
     } else if (a == "--pace-ms") {
       pace_ms = so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 0, 10000);
+    } else if (a == "--threads") {
+      threads = static_cast<int>(so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 1, 64));
     } else if (a == "--frame") {
       frame = so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 0, 1000000);
     } else if (a == "--help") {
       std::cout << "usage: performance [--repeat N] [--only STAGE] [--scenario NAME [--frame K]] | --flight NAME "
-                   "[--pace-ms MS]\n"
+                   "[--pace-ms MS]; either with [--threads N]\n"
                    "Times the mapper's stages on the Table I frame (or frame K of a simulated flight, with its "
                    "stereo effects, seed 1) at 0.25 m (median and min-max of N runs, default 21) and OctoMap's "
                    "insertPointCloud on the same frame.\n"
                    "--flight NAME: the core of the mapper's path, and the fusion of its update into the flight's "
                    "map, on every frame of a simulated flight, with their mean, median, p99 and maximum; "
                    "--pace-ms MS sleeps MS before each frame, as between a camera's images.\n"
+                   "--threads N: draw and blur on N threads (default 1).\n"
                    "STAGE: "
                 << kStages << "\n";
       return 0;
@@ -152,7 +161,7 @@ int run(int argc, char** argv) {
     }
   }
   if (pace_ms > 0 && flight.empty()) throw so::tools::UsageError("--pace-ms needs --flight");
-  if (!flight.empty()) return flightPath(flight, pace_ms);
+  if (!flight.empty()) return flightPath(flight, pace_ms, threads);
   const bool quiet = !only.empty();
   auto wanted = [&](const std::string& stage) { return only.empty() || only == stage; };
 
@@ -174,7 +183,7 @@ int run(int argc, char** argv) {
   const double resolution = 0.25;
   if (!quiet)
     std::cout << frame_name << ": 640x480, b = 0.3 m, f = 700 px, 25 m range, " << resolution
-              << " m cells; one thread; median (min-max) of " << repeat << " runs [ms].\n\n"
+              << " m cells; " << threadsText(threads) << "; median (min-max) of " << repeat << " runs [ms].\n\n"
               << "| stage | time ms | what is timed |\n|---|---:|---|\n";
   auto row = [&](const std::string& stage, const Timing& t, const std::string& what) {
     if (!quiet) std::cout << "| " << stage << " | " << t.text() << " | " << what << " |" << std::endl;
@@ -185,7 +194,7 @@ int run(int argc, char** argv) {
   for (so::DrawingAlgorithm algorithm : so::allDrawingAlgorithms()) {
     const std::string name = so::toString(algorithm);
     if (!wanted(name)) continue;
-    so::DisparityDrawer drawer(camera, so::tools::drawingConfig(algorithm, resolution));
+    so::DisparityDrawer drawer(camera, so::tools::drawingConfig(algorithm, resolution, threads));
     so::LocalGrid grid;
     const bool slow = algorithm == so::DrawingAlgorithm::kLine || algorithm == so::DrawingAlgorithm::kRayTrace;
     const Timing t = timeIt(
@@ -197,7 +206,7 @@ int run(int argc, char** argv) {
 
   if (!(only.empty() || only == "blur" || only == "encode" || only == "fusion" || only == "octomap")) return 0;
   // The grid the later stages start from: line_pyramid's, as the mapper's.
-  so::DrawingConfig config = so::tools::drawingConfig(so::DrawingAlgorithm::kLinePyramid, resolution);
+  so::DrawingConfig config = so::tools::drawingConfig(so::DrawingAlgorithm::kLinePyramid, resolution, threads);
   config.blur.sigma_trans_m = 0.1;
   config.blur.sigma_angle_rad = 0.01;
   so::DisparityDrawer drawer(camera, config);

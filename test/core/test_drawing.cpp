@@ -442,6 +442,43 @@ TEST(Drawing, SimdLevelsDrawTheSameGrids) {
   }
 }
 
+// Drawing and blurring on several threads gives the grid of one thread, bit
+// for bit, and the same counters, for every algorithm (the ray tracers run
+// on one thread whatever the number), on frames with close and far surfaces.
+TEST(Drawing, ThreadCountsDrawTheSameGrids) {
+  StereoCameraConfig cam_cfg;
+  const StereoCameraModel cam(cam_cfg);
+  Eigen::Isometry3d T_table1;
+  const SyntheticScene scene = table1Scene(&T_table1);
+  std::vector<Eigen::Isometry3d> poses = testPoses();
+  poses.push_back(T_table1);
+  for (DrawingAlgorithm algorithm : kAll) {
+    DrawingConfig one_config = config(algorithm);
+    one_config.threads = 1;
+    DisparityDrawer one(cam_cfg, one_config);
+    for (int threads : {2, 3, 5}) {
+      DrawingConfig many_config = config(algorithm);
+      many_config.threads = threads;
+      DisparityDrawer many(cam_cfg, many_config);
+      for (size_t p = 0; p < poses.size(); ++p) {
+        const cv::Mat image = renderDisparity(scene, cam, poses[p]);
+        LocalGrid a, b;
+        const DrawStatistics sa = one.draw(image, poses[p], &a);
+        const DrawStatistics sb = many.draw(image, poses[p], &b);  // twice: worker grids are reused
+        const std::string what = std::string(toString(algorithm)) + " threads " + std::to_string(threads) +
+                                 " pose " + std::to_string(p);
+        EXPECT_GT(sa.different_grid_cells, 20000u) << what;
+        EXPECT_EQ(sb.coordinate_transfers, sa.coordinate_transfers) << what;
+        EXPECT_EQ(sb.used_image_pixels, sa.used_image_pixels) << what;
+        EXPECT_EQ(sb.grid_cells_drawn, sa.grid_cells_drawn) << what;
+        EXPECT_EQ(sb.different_grid_cells, sa.different_grid_cells) << what;
+        ASSERT_EQ(b.numCells(), a.numCells()) << what;
+        EXPECT_EQ(std::memcmp(b.data(), a.data(), a.numCells() * sizeof(float)), 0) << what;
+      }
+    }
+  }
+}
+
 // Table I's shape: the pyramid reads far fewer pixels and draws far fewer
 // cells for nearly the same map; counters have the paper's meaning.
 TEST(Drawing, Table1Counters) {
