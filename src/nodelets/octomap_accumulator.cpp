@@ -302,6 +302,9 @@ void OctomapAccumulator::publishOutputs() {
     last_full_publish_ = now;
   }
   publishWholeMap();
+  // The whole map's messages and the snapshot's encoding freed tens of MB
+  // of small blocks: back to the system now, not at the next eviction.
+  MissionMap::trimHeap();
 }
 
 void OctomapAccumulator::publishWholeMap() {
