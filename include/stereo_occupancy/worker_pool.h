@@ -3,6 +3,7 @@
 /// The threads one mapper uses to draw and blur an image (beyond the paper):
 /// a job's parts run on all of them, the caller's thread included.
 
+#include <atomic>
 #include <condition_variable>
 #include <cstddef>
 #include <exception>
@@ -21,6 +22,10 @@ class WorkerPool {
   /// What a `threads` parameter of 0 means: the machine's cores, at most kMaxDefaultThreads.
   static unsigned defaultThreads();
   static constexpr unsigned kMaxDefaultThreads = 4;  ///< more rarely pays for one camera's image
+  /// How long an idle worker polls for the next job before it sleeps: one
+  /// image is several short jobs in a row (draw, merge, the blur's passes),
+  /// and waking a sleeping thread costs a virtual machine about as much as a job.
+  static constexpr int kSpinMicroseconds = 200;
 
   /// @param threads workers, >= 1 (0: defaultThreads()).
   explicit WorkerPool(unsigned threads);
@@ -36,6 +41,9 @@ class WorkerPool {
 
  private:
   void serve(unsigned worker);
+  /// Polls @p ready for up to kSpinMicroseconds; true if it came true.
+  template <typename Ready>
+  static bool spinUntil(const Ready& ready);
   void work(unsigned worker);
 
   std::vector<std::thread> threads_;
@@ -43,9 +51,9 @@ class WorkerPool {
   std::condition_variable start_, done_;
   const std::function<void(size_t, unsigned)>* task_ = nullptr;
   size_t n_ = 0, next_ = 0;  ///< the job's parts; the next one to hand out
-  unsigned generation_ = 0;  ///< counts jobs: a worker joins each one once
-  unsigned busy_ = 0;        ///< workers still in the current job
-  bool stop_ = false;
+  std::atomic<unsigned> generation_{0};  ///< counts jobs: a worker joins each one once; written under mutex_
+  std::atomic<unsigned> busy_{0};  ///< workers still in the current job; written under mutex_
+  std::atomic<bool> stop_{false};
   std::exception_ptr error_;
 };
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 
 namespace stereo_occupancy {
@@ -134,19 +135,23 @@ bool DistanceDependentBlur::findInputExtents(const LocalGrid& grid) {
   const int nx = grid.size().x(), rows = grid.size().y() * grid.size().z();
   std::vector<Extent>& e0 = extent_[0];
   e0.assign(rows, Extent{});
-  bool any = false;
-  for (int r = 0; r < rows; ++r) {
-    const float* row = grid.data() + static_cast<int64_t>(nx) * r;
-    int lo = 0;
-    while (lo + kInformationBlock <= nx && !blockHasInformation(row + lo)) lo += kInformationBlock;
-    while (lo < nx && knownValue(row[lo]) == 0.0f) ++lo;
-    if (lo == nx) continue;
-    int hi = nx;
-    while (hi - kInformationBlock >= lo && !blockHasInformation(row + hi - kInformationBlock)) hi -= kInformationBlock;
-    while (hi > lo && knownValue(row[hi - 1]) == 0.0f) --hi;
-    e0[r] = Extent{lo, hi};
-    any = true;
-  }
+  std::atomic<bool> any{false};
+  forRows(rows, [&](int r_begin, int r_end, unsigned) {
+    bool mine = false;
+    for (int r = r_begin; r < r_end; ++r) {
+      const float* row = grid.data() + static_cast<int64_t>(nx) * r;
+      int lo = 0;
+      while (lo + kInformationBlock <= nx && !blockHasInformation(row + lo)) lo += kInformationBlock;
+      while (lo < nx && knownValue(row[lo]) == 0.0f) ++lo;
+      if (lo == nx) continue;
+      int hi = nx;
+      while (hi - kInformationBlock >= lo && !blockHasInformation(row + hi - kInformationBlock)) hi -= kInformationBlock;
+      while (hi > lo && knownValue(row[hi - 1]) == 0.0f) --hi;
+      e0[r] = Extent{lo, hi};
+      mine = true;
+    }
+    if (mine) any = true;
+  });
   return any;
 }
 

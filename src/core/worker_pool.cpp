@@ -1,6 +1,7 @@
 #include "stereo_occupancy/worker_pool.h"
 
 #include <algorithm>
+#include <chrono>
 
 namespace stereo_occupancy {
 
@@ -48,15 +49,27 @@ void WorkerPool::run(size_t n, const std::function<void(size_t i, unsigned worke
   }
   start_.notify_all();
   work(0);
+  spinUntil([this] { return busy_.load() == 0; });
   std::unique_lock<std::mutex> lock(mutex_);
   done_.wait(lock, [this] { return busy_ == 0; });
   task_ = nullptr;
   if (error_) std::rethrow_exception(error_);
 }
 
+template <typename Ready>
+bool WorkerPool::spinUntil(const Ready& ready) {
+  const auto until = std::chrono::steady_clock::now() + std::chrono::microseconds(kSpinMicroseconds);
+  while (!ready()) {
+    if (std::chrono::steady_clock::now() > until) return false;
+    std::this_thread::yield();  // the core to anyone who needs it
+  }
+  return true;
+}
+
 void WorkerPool::serve(unsigned worker) {
   unsigned seen = 0;
   for (;;) {
+    spinUntil([&] { return stop_.load() || generation_.load() != seen; });
     {
       std::unique_lock<std::mutex> lock(mutex_);
       start_.wait(lock, [&] { return stop_ || generation_ != seen; });

@@ -4,6 +4,7 @@
 // prints Markdown tables and asserts nothing.
 
 #include <algorithm>
+#include <chrono>
 #include <iomanip>
 #include <iostream>
 #include <sstream>
@@ -21,10 +22,12 @@ namespace tools = stereo_occupancy::tools;
 namespace {
 
 const char* kUsage =
-    "usage: scaling [--repeat N]\n"
+    "usage: scaling [--repeat N] [--threads N,M,...]\n"
     "Times the six algorithms on the Table I scene against the cell size (1.0, 0.5, 0.25, 0.1 m at\n"
     "640x480) and the image size (640x480, 1280x960, 1920x1200 at 0.25 m; f scaled with the width),\n"
-    "with the Table I counters. Median of N runs (default 7) for the pyramids, of 3 for the others.\n";
+    "with the Table I counters. Median of N runs (default 7) for the pyramids, of 3 for the others.\n"
+    "Then the line algorithms and the blur at 640x480 and 1280x960, 0.25 m, on each number of threads\n"
+    "of --threads (default 1,2), with the speed-up over the first.\n";
 
 /// The Table I scene seen by a camera of the given size: sky matched at zero
 /// disparity, 3 % of the pixels unmatched.
@@ -62,12 +65,70 @@ void row(const so::StereoCameraConfig& camera, double resolution, int repeat) {
   }
 }
 
+so::StereoCameraConfig cameraOfWidth(int w, int h) {
+  so::StereoCameraConfig camera;
+  camera.width_px = w;
+  camera.height_px = h;
+  camera.focal_length_px = 700.0 * w / 640.0;
+  camera.cx_px = 0.5 * (w - 1);
+  camera.cy_px = 0.5 * (h - 1);
+  return camera;
+}
+
+/// Median time [ms] of @p repeat blurs of @p drawn (eq. 17, σ_trans 0.1 m, σ_angle 0.01 rad).
+double blurMs(so::DisparityDrawer* drawer, const so::LocalGrid& drawn, const Eigen::Isometry3d& T_W_C, int repeat) {
+  std::vector<double> ms;
+  so::LocalGrid grid;
+  for (int r = 0; r < repeat; ++r) {
+    grid = drawn;
+    const auto t0 = std::chrono::steady_clock::now();
+    drawer->blur(T_W_C, &grid);
+    ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  }
+  std::sort(ms.begin(), ms.end());
+  return ms[ms.size() / 2];
+}
+
+/// The line algorithms and the blur on each number of @p threads, with the speed-up over the first.
+void threadRows(const so::StereoCameraConfig& camera, const std::vector<int>& threads, int repeat) {
+  Eigen::Isometry3d T_W_C;
+  const cv::Mat image = sceneImage(camera, &T_W_C);
+  for (const char* stage : {"line", "line_pyramid", "line_pyramid_bounded", "blur"}) {
+    double first_ms = 0.0;
+    for (size_t k = 0; k < threads.size(); ++k) {
+      const bool blur = std::string(stage) == "blur";
+      so::DrawingAlgorithm algorithm = so::DrawingAlgorithm::kLinePyramid;  // the blur's grid
+      if (!blur) so::parseDrawingAlgorithm(stage, &algorithm);
+      so::DrawingConfig config = tools::drawingConfig(algorithm, 0.25, threads[k]);
+      config.blur.sigma_trans_m = 0.1;
+      config.blur.sigma_angle_rad = 0.01;
+      so::DisparityDrawer drawer(camera, config);
+      so::LocalGrid grid;
+      so::DrawStatistics stats;
+      const int runs = std::string(stage) == "line" ? 3 : repeat;
+      const std::vector<double> ms =
+          tools::timeDrawing(&drawer, image, T_W_C, runs, /*time_grid_preparation=*/false, &grid, &stats);
+      const double median = blur ? blurMs(&drawer, grid, T_W_C, runs) : ms[ms.size() / 2];
+      if (k == 0) first_ms = median;
+      std::cout << "| " << camera.width_px << "x" << camera.height_px << " | " << stage << " | " << threads[k]
+                << " | " << std::fixed << std::setprecision(median < 10 ? 2 : 1) << median << " | "
+                << std::setprecision(2) << first_ms / median << " |" << std::endl;
+    }
+  }
+}
+
 int run(int argc, char** argv) {
   int repeat = 7;
+  std::vector<int> threads = {1, 2};
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--repeat") {
       repeat = static_cast<int>(tools::parseWhole(a, tools::nextValue(argc, argv, &i), 1, 1000));
+    } else if (a == "--threads") {
+      threads.clear();
+      std::stringstream list(tools::nextValue(argc, argv, &i));
+      for (std::string n; std::getline(list, n, ',');)
+        threads.push_back(static_cast<int>(tools::parseWhole(a, n, 1, 64)));
     } else if (a == "--help") {
       std::cout << kUsage;
       return 0;
@@ -82,15 +143,12 @@ int run(int argc, char** argv) {
   std::cout << "## Against the cell size (640x480)\n\n" << header;
   for (double resolution : {1.0, 0.5, 0.25, 0.1}) row(so::StereoCameraConfig(), resolution, repeat);
   std::cout << "\n## Against the image size (0.25 m)\n\n" << header;
-  for (const auto& [w, h] : {std::make_pair(640, 480), std::make_pair(1280, 960), std::make_pair(1920, 1200)}) {
-    so::StereoCameraConfig camera;
-    camera.width_px = w;
-    camera.height_px = h;
-    camera.focal_length_px = 700.0 * w / 640.0;
-    camera.cx_px = 0.5 * (w - 1);
-    camera.cy_px = 0.5 * (h - 1);
-    row(camera, 0.25, repeat);
-  }
+  for (const auto& [w, h] : {std::make_pair(640, 480), std::make_pair(1280, 960), std::make_pair(1920, 1200)})
+    row(cameraOfWidth(w, h), 0.25, repeat);
+  std::cout << "\n## Against the threads (0.25 m)\n\n"
+               "| image | stage | threads | time ms | speed-up |\n|---|---|---:|---:|---:|\n";
+  for (const auto& [w, h] : {std::make_pair(640, 480), std::make_pair(1280, 960)})
+    threadRows(cameraOfWidth(w, h), threads, repeat);
   return 0;
 }
 

@@ -452,13 +452,17 @@ TEST(Drawing, ThreadCountsDrawTheSameGrids) {
   const SyntheticScene scene = table1Scene(&T_table1);
   std::vector<Eigen::Isometry3d> poses = testPoses();
   poses.push_back(T_table1);
+  auto blurred = [](DrawingAlgorithm algorithm, int threads) {
+    DrawingConfig c = config(algorithm);
+    c.threads = threads;
+    c.blur.sigma_trans_m = 0.1;  // eq. 17 on: the blur's passes are shared too
+    c.blur.sigma_angle_rad = 0.01;
+    return c;
+  };
   for (DrawingAlgorithm algorithm : kAll) {
-    DrawingConfig one_config = config(algorithm);
-    one_config.threads = 1;
-    DisparityDrawer one(cam_cfg, one_config);
+    DisparityDrawer one(cam_cfg, blurred(algorithm, 1));
     for (int threads : {2, 3, 5}) {
-      DrawingConfig many_config = config(algorithm);
-      many_config.threads = threads;
+      const DrawingConfig many_config = blurred(algorithm, threads);
       DisparityDrawer many(cam_cfg, many_config);
       for (size_t p = 0; p < poses.size(); ++p) {
         const cv::Mat image = renderDisparity(scene, cam, poses[p]);
