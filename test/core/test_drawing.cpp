@@ -41,6 +41,23 @@ std::vector<Eigen::Isometry3d> testPoses() {
   return poses;
 }
 
+/// The Table I scene seen from testPoses() and Table I's pose: lines along
+/// every axis in both directions, close and far surfaces.
+struct EquivalenceFrames {
+  std::vector<Eigen::Isometry3d> poses;
+  std::vector<cv::Mat> images;
+};
+EquivalenceFrames equivalenceFrames(const StereoCameraConfig& cam_cfg) {
+  const StereoCameraModel cam(cam_cfg);
+  Eigen::Isometry3d T_table1;
+  const SyntheticScene scene = table1Scene(&T_table1);
+  EquivalenceFrames frames;
+  frames.poses = testPoses();
+  frames.poses.push_back(T_table1);
+  for (const Eigen::Isometry3d& T : frames.poses) frames.images.push_back(renderDisparity(scene, cam, T));
+  return frames;
+}
+
 /// A cell's depth, image position and range as seen from T_W_C.
 struct CellView {
   double z, u, v, l;
@@ -408,12 +425,8 @@ TEST(Drawing, DifferentCellsCountedOnRequest) {
 // that other targets run, bit for bit, for every line drawing algorithm,
 // from poses whose lines run along every axis in both directions.
 TEST(Drawing, SimdLevelsDrawTheSameGrids) {
-  StereoCameraConfig cam_cfg;
-  const StereoCameraModel cam(cam_cfg);
-  Eigen::Isometry3d T_table1;
-  const SyntheticScene scene = table1Scene(&T_table1);
-  std::vector<Eigen::Isometry3d> poses = testPoses();
-  poses.push_back(T_table1);
+  const StereoCameraConfig cam_cfg;
+  const EquivalenceFrames frames = equivalenceFrames(cam_cfg);
   const SimdLevel best = availableSimdLevel();
   std::printf("[          ] free run: this target allows %s\n", toString(best));
   for (DrawingAlgorithm algorithm :
@@ -421,10 +434,10 @@ TEST(Drawing, SimdLevelsDrawTheSameGrids) {
     DrawingConfig scalar_config = config(algorithm);
     scalar_config.simd = SimdLevel::kScalar;
     DisparityDrawer scalar(cam_cfg, scalar_config);
-    for (size_t p = 0; p < poses.size(); ++p) {
-      const cv::Mat image = renderDisparity(scene, cam, poses[p]);
+    for (size_t p = 0; p < frames.poses.size(); ++p) {
+      const cv::Mat& image = frames.images[p];
       LocalGrid plain;
-      const DrawStatistics plain_stats = scalar.draw(image, poses[p], &plain);
+      const DrawStatistics plain_stats = scalar.draw(image, frames.poses[p], &plain);
       EXPECT_GT(plain_stats.different_grid_cells, 20000u) << toString(algorithm) << " pose " << p;
       for (SimdLevel level : {SimdLevel::kSse2}) {
         if (level > best) continue;
@@ -432,7 +445,7 @@ TEST(Drawing, SimdLevelsDrawTheSameGrids) {
         simd_config.simd = level;
         DisparityDrawer drawer(cam_cfg, simd_config);
         LocalGrid simd;
-        const DrawStatistics stats = drawer.draw(image, poses[p], &simd);
+        const DrawStatistics stats = drawer.draw(image, frames.poses[p], &simd);
         EXPECT_EQ(stats.grid_cells_drawn, plain_stats.grid_cells_drawn);
         ASSERT_EQ(simd.numCells(), plain.numCells());
         EXPECT_EQ(std::memcmp(simd.data(), plain.data(), plain.numCells() * sizeof(float)), 0)
@@ -446,12 +459,8 @@ TEST(Drawing, SimdLevelsDrawTheSameGrids) {
 // for bit, and the same counters, for every algorithm (the ray tracers run
 // on one thread whatever the number), on frames with close and far surfaces.
 TEST(Drawing, ThreadCountsDrawTheSameGrids) {
-  StereoCameraConfig cam_cfg;
-  const StereoCameraModel cam(cam_cfg);
-  Eigen::Isometry3d T_table1;
-  const SyntheticScene scene = table1Scene(&T_table1);
-  std::vector<Eigen::Isometry3d> poses = testPoses();
-  poses.push_back(T_table1);
+  const StereoCameraConfig cam_cfg;
+  const EquivalenceFrames frames = equivalenceFrames(cam_cfg);
   auto blurred = [](DrawingAlgorithm algorithm, int threads) {
     DrawingConfig c = config(algorithm);
     c.threads = threads;
@@ -464,11 +473,10 @@ TEST(Drawing, ThreadCountsDrawTheSameGrids) {
     for (int threads : {2, 3, 5}) {
       const DrawingConfig many_config = blurred(algorithm, threads);
       DisparityDrawer many(cam_cfg, many_config);
-      for (size_t p = 0; p < poses.size(); ++p) {
-        const cv::Mat image = renderDisparity(scene, cam, poses[p]);
+      for (size_t p = 0; p < frames.poses.size(); ++p) {
         LocalGrid a, b;
-        const DrawStatistics sa = one.draw(image, poses[p], &a);
-        const DrawStatistics sb = many.draw(image, poses[p], &b);  // twice: worker grids are reused
+        const DrawStatistics sa = one.draw(frames.images[p], frames.poses[p], &a);
+        const DrawStatistics sb = many.draw(frames.images[p], frames.poses[p], &b);
         const std::string what = std::string(toString(algorithm)) + " threads " + std::to_string(threads) +
                                  " pose " + std::to_string(p);
         EXPECT_GT(sa.different_grid_cells, 20000u) << what;
