@@ -333,12 +333,17 @@ void LineDrawer::drawParts(size_t parts, const RayGrid& g, LocalGrid* grid, Draw
   for (unsigned w = 1; w < workers; ++w) worker_grids_[w - 1].resize(grid->numCells(), LocalGrid::kUnknown);
   std::vector<DrawStatistics> worker_stats(workers);
   std::vector<char> used(workers, 0);  // char, not bool: each worker writes its own element
-  pool_->run(parts, [&](size_t part, unsigned w) {
-    RayGrid mine = g;
-    if (w > 0) mine.data = worker_grids_[w - 1].data();
-    used[w] = 1;
-    draw_part(part, mine, &worker_stats[w]);
-  });
+  try {
+    pool_->run(parts, [&](size_t part, unsigned w) {
+      RayGrid mine = g;
+      if (w > 0) mine.data = worker_grids_[w - 1].data();
+      used[w] = 1;
+      draw_part(part, mine, &worker_stats[w]);
+    });
+  } catch (...) {
+    mergeWorkerGrids(used, grid);  // the worker grids are unknown again for the next image
+    throw;
+  }
   for (const DrawStatistics& s : worker_stats) addTo(s, stats);
   mergeWorkerGrids(used, grid);
 }
