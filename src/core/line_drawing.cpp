@@ -370,14 +370,9 @@ void LineDrawer::drawPyramidParts(const Descent& s, LocalGrid* grid, DrawStatist
   std::vector<PartStart> starts;
   Descent above = s;
   above.parts = &starts;
-  above.split_level = workers > 1 ? splitLevel(s.min_pyramid, workers) : top;
-  if (above.split_level == top) {
-    for (int y = 0; y < s.min_pyramid.height(top); ++y)
-      for (int x = 0; x < s.min_pyramid.width(top); ++x) starts.push_back({x, y, 0.0});
-  } else {
-    for (int y = 0; y < s.min_pyramid.height(top); ++y)
-      for (int x = 0; x < s.min_pyramid.width(top); ++x) descend_from(above, top, x, y, 0.0);
-  }
+  above.split_level = workers > 1 ? splitLevel(s.min_pyramid, workers) : top;  // top: each block one part
+  for (int y = 0; y < s.min_pyramid.height(top); ++y)
+    for (int x = 0; x < s.min_pyramid.width(top); ++x) descend_from(above, top, x, y, 0.0);
   const int level = above.split_level;
   drawParts(starts.size(), s.grid, grid, stats, [&](size_t part, const RayGrid& g, DrawStatistics* part_stats) {
     Descent mine = s;
