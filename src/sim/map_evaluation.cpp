@@ -100,6 +100,35 @@ std::vector<RangeBand> standardRangeBands() {
   return {{0.0, 10.0}, {10.0, 20.0}, {20.0, std::numeric_limits<double>::infinity()}};
 }
 
+namespace {
+/// The centre of the cell with global index @p g [m].
+Eigen::Vector3d cellCentre(const Eigen::Vector3i& g, double resolution_m) {
+  return (g.cast<double>().array() + 0.5).matrix() * resolution_m;
+}
+
+/// @p map's node at the cell with global index @p g (cells of its resolution), or null.
+const octomap::OcTreeNode* nodeAt(const octomap::OcTree& map, const Eigen::Vector3i& g) {
+  const Eigen::Vector3d p = cellCentre(g, map.getResolution());
+  return map.search(p.x(), p.y(), p.z());
+}
+
+/// Scores true surface cell @p g (a global index) into @p q: counted, called
+/// free by its own node, found if an occupied node lies within one cell.
+void scoreSurfaceCell(const octomap::OcTree& map, const Eigen::Vector3i& g, MapQuality* q) {
+  ++q->truth_surface_cells;
+  const octomap::OcTreeNode* own = nodeAt(map, g);
+  if (own && !map.isNodeOccupied(own)) ++q->surface_called_free;
+  bool found = false;
+  for (int dz = -1; dz <= 1 && !found; ++dz)
+    for (int dy = -1; dy <= 1 && !found; ++dy)
+      for (int dx = -1; dx <= 1 && !found; ++dx) {
+        const octomap::OcTreeNode* n = nodeAt(map, g + Eigen::Vector3i(dx, dy, dz));
+        found = n && map.isNodeOccupied(n);
+      }
+  q->surface_found += found;
+}
+}  // namespace
+
 MapQuality evaluateMap(const octomap::OcTree& map, const SyntheticScene& scene, const ObservedGroundTruth& truth,
                        const RangeBand& band) {
   MapQuality q;
@@ -122,30 +151,15 @@ MapQuality evaluateMap(const octomap::OcTree& map, const SyntheticScene& scene, 
     if (scene.distance(centre) <= tolerance) ++q.occupied_at_surface;
     else if (!scene.isInside(centre)) ++q.occupied_phantom;
   }
-  auto centreOf = [&](const Eigen::Vector3i& g) { return Eigen::Vector3d((g.cast<double>().array() + 0.5).matrix() * c); };
-  auto node = [&](const Eigen::Vector3i& g) {
-    const Eigen::Vector3d p = centreOf(g);
-    return map.search(p.x(), p.y(), p.z());
-  };
   for (uint64_t key : truth.surface) {
     const Eigen::Vector3i g = unpackCell(key);
-    if (!inBand(centreOf(g))) continue;
-    ++q.truth_surface_cells;
-    const octomap::OcTreeNode* own = node(g);
-    if (own && !map.isNodeOccupied(own)) ++q.surface_called_free;
-    bool found = false;
-    for (int dz = -1; dz <= 1 && !found; ++dz)
-      for (int dy = -1; dy <= 1 && !found; ++dy)
-        for (int dx = -1; dx <= 1 && !found; ++dx) {
-          const octomap::OcTreeNode* n = node(g + Eigen::Vector3i(dx, dy, dz));
-          found = n && map.isNodeOccupied(n);
-        }
-    q.surface_found += found;
+    if (inBand(cellCentre(g, c))) scoreSurfaceCell(map, g, &q);
   }
   for (uint64_t key : truth.empty) {
-    if (!inBand(centreOf(unpackCell(key)))) continue;
+    const Eigen::Vector3i g = unpackCell(key);
+    if (!inBand(cellCentre(g, c))) continue;
     ++q.truth_empty_cells;
-    const octomap::OcTreeNode* n = node(unpackCell(key));
+    const octomap::OcTreeNode* n = nodeAt(map, g);
     q.empty_known_free += n && !map.isNodeOccupied(n);
   }
   return q;
@@ -181,22 +195,7 @@ MapQuality evaluateAgainstSurface(const octomap::OcTree& map, const std::unorder
           q.occupied_at_surface += nearSurface(LocalGrid::globalIndex(centre, c));
         }
   }
-  for (uint64_t key : surface) {
-    const Eigen::Vector3i g = unpackCell(key);
-    ++q.truth_surface_cells;
-    const Eigen::Vector3d p((g.cast<double>().array() + 0.5).matrix() * c);
-    const octomap::OcTreeNode* own = map.search(p.x(), p.y(), p.z());
-    if (own && !map.isNodeOccupied(own)) ++q.surface_called_free;
-    bool found = false;
-    for (int dz = -1; dz <= 1 && !found; ++dz)
-      for (int dy = -1; dy <= 1 && !found; ++dy)
-        for (int dx = -1; dx <= 1 && !found; ++dx) {
-          const Eigen::Vector3d n = p + Eigen::Vector3d(dx, dy, dz) * c;
-          const octomap::OcTreeNode* node = map.search(n.x(), n.y(), n.z());
-          found = node && map.isNodeOccupied(node);
-        }
-    q.surface_found += found;
-  }
+  for (uint64_t key : surface) scoreSurfaceCell(map, unpackCell(key), &q);
   return q;
 }
 

@@ -84,10 +84,7 @@ int run(int argc, char** argv) {
         throw tools::UsageError("--algorithm must be one of " + so::drawingAlgorithmNames());
       algorithms.push_back(algorithm);
     } else if (a == "--model" || a == "--map") {  // name=value of the sensor model or the map, repeatable
-      const std::string kv = tools::nextValue(argc, argv, &i);
-      const size_t eq = kv.find('=');
-      if (eq == std::string::npos) throw tools::UsageError(a + " takes NAME=VALUE");
-      (a == "--model" ? model_values : map_values)[kv.substr(0, eq)] = tools::parseNumber(a, kv.substr(eq + 1));
+      tools::addNameValue(argc, argv, &i, a == "--model" ? &model_values : &map_values);
     } else if (a == "--no-octomap") {
       with_octomap = false;
     } else if (a == "--resolution") {  // repeatable

@@ -98,10 +98,7 @@ int run(int argc, char** argv) {
       if (!so::parseDrawingAlgorithm(tools::nextValue(argc, argv, &i), &algorithm))
         throw tools::UsageError("--algorithm must be one of " + so::drawingAlgorithmNames());
     } else if (a == "--model") {
-      const std::string kv = tools::nextValue(argc, argv, &i);
-      const size_t eq = kv.find('=');
-      if (eq == std::string::npos) throw tools::UsageError("--model takes NAME=VALUE");
-      model_values[kv.substr(0, eq)] = tools::parseNumber(a, kv.substr(eq + 1));
+      tools::addNameValue(argc, argv, &i, &model_values);
     } else {
       throw tools::UsageError("unknown option '" + a + "'");
     }

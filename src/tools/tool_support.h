@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <exception>
 #include <iostream>
+#include <map>
 #include <stdexcept>
 #include <string>
 
@@ -44,6 +45,16 @@ inline long parseWhole(const std::string& option, const std::string& text, long 
 inline std::string nextValue(int argc, char** argv, int* i) {
   if (*i + 1 >= argc) throw UsageError(std::string(argv[*i]) + " needs a value");
   return argv[++*i];
+}
+
+/// The NAME=VALUE after option argv[i] (advancing i) into (*values)[NAME],
+/// VALUE a finite number; or a UsageError naming the option.
+inline void addNameValue(int argc, char** argv, int* i, std::map<std::string, double>* values) {
+  const std::string option = argv[*i];
+  const std::string kv = nextValue(argc, argv, i);
+  const size_t eq = kv.find('=');
+  if (eq == std::string::npos || eq == 0) throw UsageError(option + " takes NAME=VALUE");
+  (*values)[kv.substr(0, eq)] = parseNumber(option, kv.substr(eq + 1));
 }
 
 /// The named simulated flight, or a UsageError listing the names.
