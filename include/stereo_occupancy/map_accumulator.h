@@ -177,7 +177,7 @@ class MapAccumulator {
   std::unordered_set<uint64_t> changed_blocks_;  ///< packed BlockIndex of the blocks changed
   std::unordered_set<uint64_t> dirty_tiles_;     ///< packed TileIndex of the tiles changed
   bool all_dirty_ = false;                       ///< every tile changed (load)
-  bool all_changed_ = true;                      ///< the whole map changed (reset, load, clearBox)
+  bool all_changed_ = true;                      ///< the whole map changed (reset, load)
 };
 
 }  // namespace stereo_occupancy

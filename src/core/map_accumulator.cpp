@@ -184,12 +184,11 @@ size_t MapAccumulator::clearBox(const Eigen::Vector3d& W_min, const Eigen::Vecto
   const int offset = static_cast<int>(tree_->coordToKey(0.0));
   for (const octomap::OcTreeKey& k : cells) {
     tree_->setNodeValue(k, cleared, /*lazy_eval=*/true);
-    dirty_tiles_.insert(packBlock(Eigen::Vector3i(floorDiv(k[0] - offset, kTileCells),
-                                                  floorDiv(k[1] - offset, kTileCells),
-                                                  floorDiv(k[2] - offset, kTileCells))));
+    const Eigen::Vector3i b(blockOf(k[0] - offset), blockOf(k[1] - offset), blockOf(k[2] - offset));
+    if (!all_changed_) changed_blocks_.insert(packBlock(b));  // the outputs redo these blocks only
+    dirty_tiles_.insert(packBlock(Eigen::Vector3i(tileOfBlock(b.x()), tileOfBlock(b.y()), tileOfBlock(b.z()))));
   }
   inner_stale_ = inner_stale_ || !cells.empty();
-  all_changed_ = all_changed_ || !cells.empty();
   return cells.size();
 }
 

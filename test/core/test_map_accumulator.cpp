@@ -336,6 +336,23 @@ TEST(MapAccumulator, ClearBoxLeavesNothingOccupiedInside) {
   EXPECT_EQ(map.clearBox(Eigen::Vector3d(0.5, 0.5, 0.5), Eigen::Vector3d(1.49, 1.49, 1.49)), 0u);  // nothing left
 }
 
+// The outputs redo only the blocks a clear_bbx reached, not the whole map.
+TEST(MapAccumulator, ClearBoxChangesOnlyItsBlocks) {
+  MapAccumulator map{MapAccumulatorConfig()};
+  for (int x : {5, 40, 100}) ASSERT_TRUE(map.integrate(singleCell(Eigen::Vector3i(x, 5, 5), 1.0f)));
+  bool all = false;
+  map.takeChangedBlocks(&all);  // the new map's "everything"
+  ASSERT_TRUE(all);
+  // Cells 36..47 along x at 0.25 m: the cell at x = 40 (block 2) only.
+  EXPECT_EQ(map.clearBox(Eigen::Vector3d(9.0, 1.0, 1.0), Eigen::Vector3d(11.9, 1.49, 1.49)), 1u);
+  const std::vector<MapAccumulator::BlockIndex> blocks = map.takeChangedBlocks(&all);
+  EXPECT_FALSE(all);
+  ASSERT_EQ(blocks.size(), 1u);
+  EXPECT_EQ(blocks[0], Eigen::Vector3i(2, 0, 0));  // 40 / 16
+  EXPECT_EQ(map.clearBox(Eigen::Vector3d(9.0, 1.0, 1.0), Eigen::Vector3d(11.9, 1.49, 1.49)), 0u);
+  EXPECT_TRUE(map.takeChangedBlocks(&all).empty());  // nothing cleared, nothing changed
+}
+
 // A map within the slack beyond its extent is left as it is (a prune
 // rebuilds the tree); once it reaches past the slack, everything beyond the
 // extent goes, the cell within the slack too.
