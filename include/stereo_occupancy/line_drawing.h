@@ -50,6 +50,13 @@ class LineDrawer {
   void setWorkers(WorkerPool* pool) { pool_ = pool; }
   /// Grids of more cells are drawn on one thread (a worker's grid would cost too much memory).
   static constexpr size_t kMaxSharedGridCells = size_t{16} << 20;
+  /// Cells the workers' own grids hold between images (they follow the
+  /// grids drawn, and let go of what one rare huge grid needed).
+  size_t workerCellsHeld() const {
+    size_t cells = 0;
+    for (const auto& g : worker_grids_) cells += g.capacity();
+    return cells;
+  }
   /// Pyramid blocks per worker a pyramid's descent is split into: enough to share the work evenly.
   static constexpr int kPartsPerWorker = 16;
 

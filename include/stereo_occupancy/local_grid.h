@@ -121,6 +121,22 @@ inline bool blockHasInformation(const float* cells) {
 #endif
 }
 
+/// True if one of the kInformationBlock cells from @p cells is known (not
+/// LocalGrid::kUnknown): lets a merge of mostly untouched grids skip them
+/// 16 cells at a time (SSE2 where available).
+inline bool blockHasKnown(const float* cells) {
+#if defined(__SSE2__)
+  const __m128 unknown = _mm_set1_ps(LocalGrid::kUnknown);
+  __m128 hit = _mm_setzero_ps();
+  for (int j = 0; j < kInformationBlock; j += 4) hit = _mm_or_ps(hit, _mm_cmpneq_ps(_mm_loadu_ps(cells + j), unknown));
+  return _mm_movemask_ps(hit) != 0;
+#else
+  bool hit = false;
+  for (int j = 0; j < kInformationBlock; ++j) hit |= cells[j] != LocalGrid::kUnknown;
+  return hit;
+#endif
+}
+
 /// True if one of the kInformationBlock cells from @p cells is occupied
 /// (log-odds > 0): lets silenceNearOccupied() skip a frame's grid 16 cells
 /// at a time (SSE2 where available).

@@ -330,7 +330,10 @@ void LineDrawer::drawParts(size_t parts, const RayGrid& g, LocalGrid* grid, Draw
     return;
   }
   if (worker_grids_.size() < workers - 1) worker_grids_.resize(workers - 1);
-  for (unsigned w = 1; w < workers; ++w) worker_grids_[w - 1].resize(grid->numCells(), LocalGrid::kUnknown);
+  for (unsigned w = 1; w < workers; ++w) {
+    releaseIfOversized(&worker_grids_[w - 1], grid->numCells());  // after one rare huge grid
+    worker_grids_[w - 1].resize(grid->numCells(), LocalGrid::kUnknown);
+  }
   std::vector<DrawStatistics> worker_stats(workers);
   std::vector<char> used(workers, 0);  // char, not bool: each worker writes its own element
   try {
@@ -383,6 +386,7 @@ void LineDrawer::drawPyramidParts(const Descent& s, LocalGrid* grid, DrawStatist
 }
 
 void LineDrawer::mergeWorkerGrids(const std::vector<char>& used, LocalGrid* grid) {
+  constexpr size_t kBlock = kInformationBlock;
   float* cells = grid->data();
   const size_t n = grid->numCells();
   pool_->run((n + kMergeChunkCells - 1) / kMergeChunkCells, [&](size_t chunk, unsigned) {
@@ -390,9 +394,14 @@ void LineDrawer::mergeWorkerGrids(const std::vector<char>& used, LocalGrid* grid
     for (size_t w = 1; w < used.size(); ++w) {
       if (!used[w]) continue;
       float* other = worker_grids_[w - 1].data();
-      for (size_t i = begin; i < end; ++i) {
-        cells[i] = std::max(cells[i], other[i]);  // obstacle priority, as drawCell
-        other[i] = LocalGrid::kUnknown;            // ready for the next image
+      for (size_t i = begin; i < end; i += kBlock) {
+        const size_t block_end = std::min(end, i + kBlock);
+        // Most of a frustum's box is outside the worker's lines: read, not written.
+        if (block_end - i == kBlock && !blockHasKnown(other + i)) continue;
+        for (size_t j = i; j < block_end; ++j) {
+          cells[j] = std::max(cells[j], other[j]);  // obstacle priority, as drawCell
+          other[j] = LocalGrid::kUnknown;            // ready for the next image
+        }
       }
     }
   });

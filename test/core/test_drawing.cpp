@@ -272,6 +272,27 @@ TEST_F(LineDrawing, ObstaclePriority) {
 // A segment [l_begin, l_stop] of a line (the bounded pyramid's shared free
 // stretch and the lines of its children) draws exactly the cells of the whole
 // line whose slab centre planes lie inside it, with the same values.
+// A worker's grid follows the grids drawn: after one huge grid it does not
+// keep that memory for the small grids that follow.
+TEST_F(LineDrawing, WorkerGridsLetGoOfAHugeGrid) {
+  WorkerPool pool(2);
+  drawer.setWorkers(&pool);
+  cv::Mat image(480, 640, CV_32FC1, cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
+  image.row(240).setTo(cv::Scalar(21.0));  // one row of a wall 10 m ahead
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.translation() = Eigen::Vector3d(1.0, 1.0, 1.0);
+  DrawStatistics stats;
+  LocalGrid huge, small;
+  huge.reset(Eigen::Vector3i(-100, -100, 0), Eigen::Vector3i(200, 200, 130), 0.25);  // 5.2 M cells
+  drawer.drawImage(image, T, &huge, &stats);
+  EXPECT_EQ(drawer.workerCellsHeld(), huge.numCells());
+  EXPECT_GT(huge.countKnown(), 100u);
+  small.reset(Eigen::Vector3i(-40, -40, 0), Eigen::Vector3i(80, 80, 60), 0.25);  // 384 k cells
+  drawer.drawImage(image, T, &small, &stats);
+  EXPECT_EQ(drawer.workerCellsHeld(), small.numCells());
+  EXPECT_GT(small.countKnown(), 100u);
+}
+
 TEST_F(LineDrawing, SegmentsDrawThePartOfTheLine) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> u(-1.0, 1.0), range(2.0, 24.0), cut(0.0, 1.0);
