@@ -7,6 +7,10 @@
 
 #include <algorithm>
 #include <array>
+#include <memory>
+#include <vector>
+
+#include "stereo_occupancy/worker_pool.h"
 
 namespace stereo_occupancy {
 
@@ -28,6 +32,15 @@ class AccumulatingOcTree : public octomap::OcTree {
   class LeafUpdater {
    public:
     explicit LeafUpdater(AccumulatingOcTree* tree) : tree_(tree) {}
+    /// Adds below @p subtree only, the node at @p depth on the path of every
+    /// key given (@p inside is one of them); @p created: that node is new.
+    /// Nodes are created through @p counter, a tree of the same depth and
+    /// clamping bounds whose node count grows instead (one per worker).
+    LeafUpdater(AccumulatingOcTree* counter, octomap::OcTreeNode* subtree, int depth, const octomap::OcTreeKey& inside,
+                bool created)
+        : tree_(counter), floor_depth_(depth), known_depth_(depth), previous_(inside), next_created_(created) {
+      path_[static_cast<size_t>(depth)] = subtree;
+    }
     void add(const octomap::OcTreeKey& key, float log_odds);
     /// add() for each of a node's eight leaves that has a value, in child
     /// order: leaf i has the key @p first + (i & 1, (i >> 1) & 1, i >> 2)
@@ -41,9 +54,30 @@ class AccumulatingOcTree : public octomap::OcTree {
 
     AccumulatingOcTree* tree_;
     std::array<octomap::OcTreeNode*, 17> path_{};  ///< path_[d]: the previous key's node at depth d
-    int known_depth_ = -1;                         ///< path_[0 .. known_depth_] is valid
+    int floor_depth_ = 0;                          ///< the walks start at this depth or below
+    int known_depth_ = -1;                         ///< path_[floor_depth_ .. known_depth_] is valid
     octomap::OcTreeKey previous_;
+    bool next_created_ = false;  ///< the next add()'s first node is new (a worker's subtree)
   };
+
+  /// One sibling block of an update: addSiblings()'s arguments.
+  struct SiblingBlock {
+    octomap::OcTreeKey first;
+    float values[8];
+  };
+  /// Depth of the subtrees whose blocks are one worker's part: cubes of
+  /// 2^(16 - kPartDepth) = 16 cells, MapAccumulator::kBlockCells.
+  static constexpr int kPartDepth = 12;
+  /// Trees that count the nodes each worker creates (LeafUpdater's counter).
+  using WorkerCounters = std::vector<std::unique_ptr<AccumulatingOcTree>>;
+  /// addSiblings() for every block of @p parts[0 .. num_parts), each part the
+  /// blocks of one subtree at kPartDepth, on @p pool's workers. The path to
+  /// each subtree is made first on this thread, as the first update below it
+  /// would make it; the parts below a pruned leaf above kPartDepth (whether
+  /// it is expanded depends on their values) go on this thread after the
+  /// others. The tree is the same, bit for bit, as addSiblings() on one thread.
+  void addSiblingsInParts(const std::vector<std::vector<SiblingBlock>>& parts, size_t num_parts, WorkerPool* pool,
+                          WorkerCounters* counters);
 
   /// Sets the leaf of @p key at @p depth (pruned leaves keep their size).
   /// octomap 1.9's deleteNode leaves the emptied inner nodes' child arrays
@@ -61,27 +95,30 @@ class AccumulatingOcTree : public octomap::OcTree {
   /// Frees everything below @p node, which becomes a leaf: octomap frees a
   /// node's child array only in pruneNode(), so each level is made prunable.
   void collapse(octomap::OcTreeNode* node);
+  /// The node at kPartDepth on @p key's path, the path made as LeafUpdater
+  /// would (@p created: the node is new); null if a pruned leaf lies above it.
+  octomap::OcTreeNode* partRoot(const octomap::OcTreeKey& key, bool* created);
 };
 
 // Inline: the accumulator calls it for every cell of every update.
 inline void AccumulatingOcTree::LeafUpdater::add(const octomap::OcTreeKey& key, float log_odds) {
   AccumulatingOcTree& t = *tree_;
   const int leaf_depth = static_cast<int>(t.tree_depth);
-  bool created = false;  // the node of the walk below was created by this call
-  if (!t.root) {
-    t.root = new octomap::OcTreeNode();
-    ++t.tree_size;
-    created = true;
-    known_depth_ = -1;
-  }
+  bool created = next_created_;  // the node of the walk below was created by this call
+  next_created_ = false;
   if (known_depth_ < 0) {
+    if (!t.root) {
+      t.root = new octomap::OcTreeNode();
+      ++t.tree_size;
+      created = true;
+    }
     path_[0] = t.root;
     known_depth_ = 0;
   }
   // The deepest common ancestor with the previous key: node depth d is
   // fixed by each key component's d highest bits.
-  int depth = 0;
-  if (known_depth_ > 0) {
+  int depth = floor_depth_;
+  if (known_depth_ > floor_depth_) {
     const unsigned differ = static_cast<unsigned>((key[0] ^ previous_[0]) | (key[1] ^ previous_[1]) |
                                                   (key[2] ^ previous_[2]));
     depth = differ == 0 ? leaf_depth : leaf_depth - 1 - (31 - __builtin_clz(differ));

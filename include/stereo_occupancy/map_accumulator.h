@@ -33,6 +33,9 @@ struct MapAccumulatorConfig {
   /// Largest box an update may claim (nx·ny·nz); larger ones are refused
   /// before anything is allocated. As DrawingConfig::max_grid_cells.
   uint64_t max_update_cells = uint64_t{64} << 20;
+  /// Threads that fuse one update (0: the machine's cores, at most
+  /// WorkerPool::kMaxDefaultThreads); the map is the same bit for bit for any number.
+  int threads = 0;
 
   /// The parameters (parameter_table.h): f(spec, member) for each.
   template <typename Self, typename F>
@@ -49,6 +52,8 @@ struct MapAccumulatorConfig {
       c.max_extent_m);
     f(numberParameter("max_update_cells", "cells", 1.0, 2147483647.0, "updates claiming a larger box are refused"),
       c.max_update_cells);
+    f(numberParameter("threads", "", 0.0, 64.0, "threads that fuse an update (0: the machine's cores, at most 4)"),
+      c.threads);
   }
 
   /// The ranges of forEachParameter(), and the threshold between the clamping bounds.
@@ -159,7 +164,12 @@ class MapAccumulator {
   std::vector<std::string> save(const std::string& directory, const std::string& base_name) const;
 
  private:
+  struct Fusion;  // the workers' parts of an update, and the workers
   void applyThresholds();
+  /// integrate()'s walk through the update's sibling blocks on this thread.
+  void fuseInOrder(const GridUpdateView& update);
+  /// The same with the blocks of each kBlockCells cube on one of the workers.
+  void fuseInParts(const GridUpdateView& update);
   /// Adds the blocks of @p edge_cells (kBlockCells, or kTileCells for tiles) that the leaf of
   /// @p key at @p depth spans to @p blocks (packed).
   void insertBlocksOf(const octomap::OcTreeKey& key, unsigned depth, std::unordered_set<uint64_t>* blocks,
@@ -178,6 +188,7 @@ class MapAccumulator {
   std::unordered_set<uint64_t> dirty_tiles_;     ///< packed TileIndex of the tiles changed
   bool all_dirty_ = false;                       ///< every tile changed (load)
   bool all_changed_ = true;                      ///< the whole map changed (reset, load)
+  std::unique_ptr<Fusion> fusion_;               ///< null: fusion on the calling thread
 };
 
 }  // namespace stereo_occupancy

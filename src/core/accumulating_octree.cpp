@@ -54,4 +54,67 @@ bool AccumulatingOcTree::dropNode(const octomap::OcTreeKey& key, unsigned depth)
   return true;
 }
 
+octomap::OcTreeNode* AccumulatingOcTree::partRoot(const octomap::OcTreeKey& key, bool* created) {
+  bool made = false;
+  if (!root) {
+    root = new octomap::OcTreeNode();
+    ++tree_size;
+    made = true;
+  }
+  octomap::OcTreeNode* node = root;
+  for (int d = 0; d < kPartDepth; ++d) {
+    const unsigned pos = octomap::computeChildIdx(key, static_cast<int>(tree_depth) - 1 - d);
+    if (!nodeChildExists(node, pos)) {
+      if (!nodeHasChildren(node) && !made) return nullptr;  // a pruned leaf: its parts' values decide
+      createNodeChild(node, pos);
+      made = true;
+    }
+    node = getNodeChild(node, pos);
+  }
+  *created = made;
+  return node;
+}
+
+void AccumulatingOcTree::addSiblingsInParts(const std::vector<std::vector<SiblingBlock>>& parts, size_t num_parts,
+                                            WorkerPool* pool, WorkerCounters* counters) {
+  struct Start {
+    octomap::OcTreeNode* node;
+    bool created;
+  };
+  std::vector<Start> starts(num_parts, Start{nullptr, false});
+  std::vector<size_t> on_workers, here;
+  for (size_t p = 0; p < num_parts; ++p) {
+    starts[p].node = partRoot(parts[p].front().first, &starts[p].created);
+    (starts[p].node ? on_workers : here).push_back(p);
+  }
+  while (counters->size() < pool->size()) counters->push_back(std::make_unique<AccumulatingOcTree>(resolution));
+  for (const auto& c : *counters) {
+    c->clamping_thres_min = clamping_thres_min;  // updateNodeLogOdds() clamps by the counter's bounds
+    c->clamping_thres_max = clamping_thres_max;
+    c->tree_size = 0;
+  }
+  auto countNodes = [&] {  // the nodes the workers created are this tree's
+    for (const auto& c : *counters) {
+      size_changed = size_changed || c->tree_size > 0;
+      tree_size += c->tree_size;
+      c->tree_size = 0;
+    }
+  };
+  try {
+    pool->run(on_workers.size(), [&](size_t i, unsigned worker) {
+      const size_t p = on_workers[i];
+      LeafUpdater updater((*counters)[worker].get(), starts[p].node, kPartDepth, parts[p].front().first,
+                          starts[p].created);
+      for (const SiblingBlock& b : parts[p]) updater.addSiblings(b.first, b.values);
+    });
+  } catch (...) {
+    countNodes();
+    throw;
+  }
+  countNodes();
+  LeafUpdater updater(this);
+  for (size_t p : here)
+    for (const SiblingBlock& b : parts[p]) updater.addSiblings(b.first, b.values);
+}
+
 }  // namespace stereo_occupancy

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <unordered_map>
 
 #include "stereo_occupancy/accumulating_octree.h"
 #include "stereo_occupancy/octomap_io.h"
@@ -20,9 +21,27 @@ bool MapAccumulatorConfig::isValid(std::string* why) const {
   return true;
 }
 
+/// Parts kept beyond an update's: more than kKeptPartsFactor times its
+/// parts and kKeptParts are let go.
+constexpr size_t kKeptPartsFactor = 4, kKeptParts = 1024;
+
+/// The parts of one update for the workers, kept from update to update
+/// (their vectors keep their memory).
+struct MapAccumulator::Fusion {
+  explicit Fusion(unsigned threads) : pool(threads) {}
+  WorkerPool pool;
+  AccumulatingOcTree::WorkerCounters counters;
+  std::vector<std::vector<AccumulatingOcTree::SiblingBlock>> parts;  ///< [0, used) hold this update's
+  std::vector<uint64_t> part_block;                                  ///< packed BlockIndex of each part
+  std::unordered_map<uint64_t, size_t> part_of;                      ///< packed BlockIndex -> part
+  size_t used = 0;
+};
+
 MapAccumulator::MapAccumulator(const MapAccumulatorConfig& config) : config_(config) {
   std::string why;
   if (!config_.isValid(&why)) throw std::invalid_argument(why);
+  const unsigned threads = config_.threads == 0 ? WorkerPool::defaultThreads() : static_cast<unsigned>(config_.threads);
+  if (threads > 1) fusion_ = std::make_unique<Fusion>(threads);
   reset();
 }
 
@@ -225,6 +244,22 @@ bool MapAccumulator::admits(const GridUpdateView& update, std::string* why) cons
 
 bool MapAccumulator::integrate(const GridUpdateView& update, std::string* why) {
   if (!admits(update, why)) return false;
+  if (fusion_) fuseInParts(update);
+  else fuseInOrder(update);
+  inner_stale_ = true;
+  if (W_recent_origins_.size() < kPruneOrigins) {
+    W_recent_origins_.push_back(update.W_sensor_origin);
+  } else {
+    W_recent_origins_[next_origin_] = update.W_sensor_origin;
+    next_origin_ = (next_origin_ + 1) % kPruneOrigins;
+  }
+  const Eigen::Vector3d W_lo = update.origin_index.cast<double>() * config_.resolution_m;
+  W_extent_.extend(W_lo).extend(W_lo + update.size.cast<double>() * config_.resolution_m);
+  ++updates_;
+  return true;
+}
+
+void MapAccumulator::fuseInOrder(const GridUpdateView& update) {
   const int offset = static_cast<int>(tree_->coordToKey(0.0));  // key of global index 0
   // Sibling leaves one after another (an octree node's eight cells): the
   // updater descends from the previous key's common ancestor, mostly the
@@ -249,17 +284,48 @@ bool MapAccumulator::integrate(const GridUpdateView& update, std::string* why) {
       last_block = block;
     }
   });
-  inner_stale_ = true;
-  if (W_recent_origins_.size() < kPruneOrigins) {
-    W_recent_origins_.push_back(update.W_sensor_origin);
-  } else {
-    W_recent_origins_[next_origin_] = update.W_sensor_origin;
-    next_origin_ = (next_origin_ + 1) % kPruneOrigins;
+}
+
+void MapAccumulator::fuseInParts(const GridUpdateView& update) {
+  static_assert(kBlockCells == 1 << (16 - AccumulatingOcTree::kPartDepth), "a part is one change-tracking block");
+  const int offset = static_cast<int>(tree_->coordToKey(0.0));
+  Fusion& f = *fusion_;
+  for (size_t p = 0; p < f.used; ++p) f.parts[p].clear();
+  f.used = 0;
+  f.part_of.clear();
+  f.part_block.clear();
+  // The blocks of each part in the order of the walk; consecutive sibling
+  // blocks mostly lie in the same part, so the map is asked when it changes.
+  uint64_t last_block = ~uint64_t{0};
+  std::vector<AccumulatingOcTree::SiblingBlock>* part = nullptr;
+  update.forEachSiblingBlock([&](const Eigen::Vector3i& g, const float(&values)[8]) {
+    const uint64_t block = packBlock(Eigen::Vector3i(blockOf(g.x()), blockOf(g.y()), blockOf(g.z())));
+    if (block != last_block) {
+      const auto inserted = f.part_of.emplace(block, f.used);
+      if (inserted.second) {
+        if (f.parts.size() == f.used) f.parts.emplace_back();
+        f.part_block.push_back(block);
+        ++f.used;
+      }
+      part = &f.parts[inserted.first->second];
+      last_block = block;
+    }
+    AccumulatingOcTree::SiblingBlock b;
+    b.first = octomap::OcTreeKey(static_cast<octomap::key_type>(g.x() + offset),
+                                 static_cast<octomap::key_type>(g.y() + offset),
+                                 static_cast<octomap::key_type>(g.z() + offset));
+    std::copy(values, values + 8, b.values);
+    part->push_back(b);
+  });
+  tree_->addSiblingsInParts(f.parts, f.used, &f.pool, &f.counters);
+  // A part holds at most one block's 512 sibling blocks; only a rare huge
+  // update leaves many more parts than the next needs: let them go.
+  if (f.parts.size() > kKeptPartsFactor * f.used + kKeptParts) f.parts.resize(f.used);
+  for (const uint64_t block : f.part_block) {
+    if (!all_changed_) changed_blocks_.insert(block);
+    const Eigen::Vector3i b = unpackBlock(block);
+    dirty_tiles_.insert(packBlock(Eigen::Vector3i(tileOfBlock(b.x()), tileOfBlock(b.y()), tileOfBlock(b.z()))));
   }
-  const Eigen::Vector3d W_lo = update.origin_index.cast<double>() * config_.resolution_m;
-  W_extent_.extend(W_lo).extend(W_lo + update.size.cast<double>() * config_.resolution_m);
-  ++updates_;
-  return true;
 }
 
 size_t MapAccumulator::prune() {

@@ -34,7 +34,7 @@ const char* kUsage =
     "camera_info) at the poses on /tf and /tf_static, and writes PREFIX.bt and PREFIX.ot.\n"
     "Topics default to launch/mapping.launch's: /stereo/disparity and /stereo/left/camera_info.\n"
     "--param takes the nodelets' parameter names (config/mapping.yaml), e.g. algorithm=raytrace.\n"
-    "--threads N: draw and blur on N threads (the mapper's threads parameter; default 0: the cores, at most 4).\n";
+    "--threads N: draw, blur and fuse on N threads (the threads parameters; default 0: the cores, at most 4).\n";
 
 /// Opens @p path for reading. A bag whose recording did not end cleanly
 /// (a crash, a full disk) has no index, and rosbag cannot read it until

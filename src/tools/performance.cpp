@@ -89,7 +89,9 @@ int flightPath(const std::string& scenario_name, long pace_ms, int threads) {
     so::DisparityDrawer drawer(scenario.camera, config);
     so::LocalGrid grid;
     so::GridUpdate update;
-    so::MapAccumulator map{so::MapAccumulatorConfig()};
+    so::MapAccumulatorConfig map_config;
+    map_config.threads = threads;
+    so::MapAccumulator map(map_config);
     std::vector<double> ms, fusion_ms;
     for (size_t i = 0; i < images.size(); ++i) {
       const Eigen::Isometry3d T_W_C = scenario.cameraPose(i);
@@ -152,7 +154,7 @@ int run(int argc, char** argv) {
                    "--flight NAME: the core of the mapper's path, and the fusion of its update into the flight's "
                    "map, on every frame of a simulated flight, with their mean, median, p99 and maximum; "
                    "--pace-ms MS sleeps MS before each frame, as between a camera's images.\n"
-                   "--threads N: draw and blur on N threads (default 1).\n"
+                   "--threads N: draw, blur and fuse on N threads (default 1).\n"
                    "STAGE: "
                 << kStages << "\n";
       return 0;
@@ -245,6 +247,7 @@ int run(int argc, char** argv) {
 
   so::MapAccumulatorConfig map_config;
   map_config.resolution_m = resolution;
+  map_config.threads = threads;
   double fusion_ms = 0.0;
   if (wanted("fusion")) {
     std::unique_ptr<so::MapAccumulator> map;

@@ -264,6 +264,84 @@ TEST(MapAccumulator, IntegrateEqualsUpdateNodeOverAFlight) {
   EXPECT_EQ(fullTree(map.tree()), fullTree(plain));
 }
 
+// Fusion on several threads (each 16-cell cube's blocks on one worker)
+// against one thread: over a flight's overlapping views, into a map that
+// holds pruned coarse leaves (clamped free and occupied cubes of 64 and 32
+// cells, above the workers' subtrees, which stay on the calling thread), the
+// same tree node for node, the same node count and the same changed blocks
+// and tiles.
+TEST(MapAccumulator, ThreadCountsFuseTheSameTree) {
+  const FlightScenario scenario = makeScenario("posts");
+  DrawingConfig drawing;
+  drawing.algorithm = DrawingAlgorithm::kLinePyramid;
+  DisparityDrawer drawer(scenario.camera, drawing);
+  std::vector<GridUpdate> updates;
+  for (size_t frame : {0u, 1u, 30u, 31u, 90u}) {
+    const Eigen::Isometry3d T = scenario.cameraPose(frame);
+    LocalGrid grid;
+    drawer.draw(renderStereoFrame(scenario, frame, 1), T, &grid);
+    updates.emplace_back();
+    encodeGridUpdate(grid, T.translation(), &updates.back());
+  }
+  // Two key-aligned cubes in front of the first camera, pruned to one leaf each.
+  MapAccumulatorConfig cfg;
+  octomap::OcTree cubes(cfg.resolution_m);
+  const Eigen::Vector3d ahead = scenario.cameraPose(0) * Eigen::Vector3d(0.0, 0.0, 12.0);
+  const int offset = static_cast<int>(cubes.coordToKey(0.0));
+  auto cube = [&](int edge, const Eigen::Vector3d& W_near, float log_odds) {
+    const Eigen::Vector3i first = (W_near / (cfg.resolution_m * edge)).array().floor().cast<int>() * edge;
+    for (int z = 0; z < edge; ++z)
+      for (int y = 0; y < edge; ++y)
+        for (int x = 0; x < edge; ++x) {
+          const Eigen::Vector3i g = first + Eigen::Vector3i(x, y, z);
+          cubes.setNodeValue(octomap::OcTreeKey(g.x() + offset, g.y() + offset, g.z() + offset), log_odds);
+        }
+  };
+  cube(64, ahead, static_cast<float>(logit(cfg.clamping_min_prob)));
+  cube(32, ahead + Eigen::Vector3d(0.0, 0.0, -8.0), static_cast<float>(logit(cfg.clamping_max_prob)));
+  cubes.updateInnerOccupancy();
+  cubes.prune();
+  ASSERT_LE(cubes.getNumLeafNodes(), 2u);
+  const std::string path = ::testing::TempDir() + "fusion_cubes.ot";
+  ASSERT_TRUE(cubes.write(path));
+
+  auto fused = [&](int threads, std::vector<std::vector<MapAccumulator::BlockIndex>>* changed) {
+    MapAccumulatorConfig c = cfg;
+    c.threads = threads;
+    auto map = std::make_unique<MapAccumulator>(c);
+    map->load(path);
+    bool all = false;
+    map->takeChangedBlocks(&all);
+    map->takeDirtyTiles();
+    for (const GridUpdate& u : updates) {
+      EXPECT_TRUE(map->integrate(u));
+      changed->push_back(map->takeChangedBlocks(&all));
+      std::sort(changed->back().begin(), changed->back().end(), [](const auto& a, const auto& b) {
+        return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
+      });
+      std::vector<MapAccumulator::TileIndex> tiles = map->takeDirtyTiles();
+      std::sort(tiles.begin(), tiles.end(), [](const auto& a, const auto& b) {
+        return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
+      });
+      changed->push_back(tiles);
+    }
+    return map;
+  };
+  std::vector<std::vector<MapAccumulator::BlockIndex>> changed_one;
+  const auto one = fused(1, &changed_one);
+  ASSERT_GT(one->tree().size(), 100000u);
+  // The updates reached both cubes: their single leaves were expanded.
+  EXPECT_GT(one->tree().getNumLeafNodes(), 2u * cubes.getNumLeafNodes() + 1000u);
+  for (int threads : {2, 3, 5}) {
+    std::vector<std::vector<MapAccumulator::BlockIndex>> changed;
+    const auto many = fused(threads, &changed);
+    EXPECT_EQ(many->tree().size(), one->tree().size()) << threads << " threads";
+    EXPECT_EQ(fullTree(many->tree()), fullTree(one->tree())) << threads << " threads";
+    EXPECT_EQ(changed, changed_one) << threads << " threads";
+  }
+  std::remove(path.c_str());
+}
+
 // A saved map loads back: the same leaves and values from the .ot, the same
 // occupancy from the .bt; a file of another resolution or none is refused
 // and the map stays as it was.
