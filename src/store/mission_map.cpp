@@ -120,6 +120,20 @@ size_t MissionMap::checkpoint() {
   return queued;
 }
 
+size_t MissionMap::clearBox(const Eigen::Vector3d& W_min, const Eigen::Vector3d& W_max) {
+  size_t cleared = 0;
+  if (store_) {
+    const Eigen::AlignedBox3d box(W_min, W_max);
+    for (const TileIndex& tile : store_->tiles()) {
+      if (resident_.count(TileStore::pack(tile)) || !box.intersects(live_.tileBox(tile))) continue;
+      makeResident(tile);
+      cleared += live_.clearBox(W_min, W_max);  // costs the box's leaves in the live map
+      maintain();                                // back to the store unless in the window
+    }
+  }
+  return cleared + live_.clearBox(W_min, W_max);
+}
+
 void MissionMap::reset() {
   live_.reset();
   resident_.clear();

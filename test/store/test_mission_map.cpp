@@ -135,6 +135,39 @@ TEST(MissionMap, TilesGoToTheStoreAndComeBackUnchanged) {
   EXPECT_EQ(start->getNumLeafNodes(), 2 * MapAccumulator::kPruneOrigins);  // the first flight's cells, all distinct
 }
 
+// clear_bbx over the whole mission: occupied cells in a tile that went to
+// the store are cleared there too, the tile goes back to the store (the live
+// map stays the window), and cells outside the box keep their values.
+TEST(MissionMap, ClearBoxReachesTheTilesOnDisk) {
+  MapAccumulatorConfig windowed;
+  windowed.max_extent_m = 40.0;
+  MissionMap mission(windowed);
+  mission.attachStore(std::make_shared<TileStore>(freshDatabase("clear_box"), kRes));
+  auto fly = [&](int x0, float value) {
+    for (int i = 0; i < 2 * static_cast<int>(MapAccumulator::kPruneOrigins); ++i)
+      ASSERT_TRUE(mission.integrate(singleCell(Eigen::Vector3i(x0 + i % 40, i % 7, i % 3), value)));
+  };
+  fly(0, 2.0f);     // occupied cells at x in [0, 10) m
+  fly(4000, 2.0f);  // 1 km away: the start goes to the store
+  ASSERT_GE(mission.maintain().tiles_stored, 1u);
+  ASSERT_EQ(mission.live().tree().search(0.1, 0.1, 0.1), nullptr);
+  const size_t live_leaves = mission.live().tree().getNumLeafNodes();
+  // x in [0, 5) m of the start (cells 0..19), and a stretch of the live map.
+  const size_t cleared = mission.clearBox(Eigen::Vector3d(0.0, 0.0, 0.0), Eigen::Vector3d(4.99, 2.0, 1.0));
+  const size_t half = MapAccumulator::kPruneOrigins;  // of the 200 distinct cells, x below 5 m
+  EXPECT_EQ(cleared, half);
+  EXPECT_EQ(mission.live().tree().search(0.1, 0.1, 0.1), nullptr) << "the cleared tile went back to the store";
+  EXPECT_EQ(mission.live().tree().getNumLeafNodes(), live_leaves);
+  EXPECT_EQ(mission.clearBox(Eigen::Vector3d(1000.0, 0.0, 0.0), Eigen::Vector3d(1004.99, 2.0, 1.0)), half);
+  mission.checkpoint();
+  ASSERT_TRUE(mission.store()->flush());
+  const auto start = MissionMap::assemble(*mission.store(), Eigen::AlignedBox3d(Eigen::Vector3d(-1, -1, -1),
+                                                                                 Eigen::Vector3d(11, 3, 2)));
+  EXPECT_EQ(start->getNumLeafNodes(), 2 * half);
+  EXPECT_EQ(occupiedLeaves(*start), half) << "only x in [5, 10) m is left occupied";
+  EXPECT_EQ(occupiedLeaves(mission.live().tree()), half) << "the live stretch: the same";
+}
+
 // One process per database; a database of another resolution or not of this
 // format is refused with a reason, not overwritten.
 TEST(TileStore, RefusesASecondOpenerAndAnotherResolution) {

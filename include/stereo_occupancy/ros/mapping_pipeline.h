@@ -147,9 +147,9 @@ class MapFusion {
   /// MapAccumulator::takeChangedBlocks() and markAllChanged(): what the outputs must send again.
   std::vector<MapAccumulator::BlockIndex> takeChangedBlocks(bool* all) { return mission_.live().takeChangedBlocks(all); }
   void markAllChanged() { mission_.live().markAllChanged(); }
-  /// Leaves no occupied cell in the box (MapAccumulator::clearBox); returns how many were cleared.
+  /// Leaves no occupied cell in the box, in the store's tiles too (MissionMap::clearBox); returns how many were cleared.
   size_t clearBox(const Eigen::Vector3d& W_min, const Eigen::Vector3d& W_max) {
-    return mission_.live().clearBox(W_min, W_max);
+    return mission_.clearBox(W_min, W_max);
   }
   /// The map's frame: world_frame, or (world_frame "") the first fused update's; "" before it.
   const std::string& frameId() const { return frame_id_; }

@@ -64,6 +64,11 @@ class MissionMap {
   /// @p whole_map, or after a reset or load: every live tile, and
   /// @p *whole_map_out is true.
   std::vector<TileContent> takeChangedTiles(bool whole_map, bool* whole_map_out);
+  /// MapAccumulator::clearBox over the whole mission: the store's tiles that
+  /// overlap the box come back one at a time, are cleared, and go back to
+  /// the store if they lie outside the window (so memory stays bounded
+  /// whatever the box). Returns how many cells were cleared.
+  size_t clearBox(const Eigen::Vector3d& W_min, const Eigen::Vector3d& W_max);
   /// Empties the map, the store's tiles too.
   void reset();
   /// MapAccumulator::load; the loaded tiles replace the store's at the next checkpoint().
