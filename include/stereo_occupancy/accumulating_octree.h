@@ -84,6 +84,12 @@ class AccumulatingOcTree : public octomap::OcTree {
   /// behind and trips an assertion, so dropping cells copies the ones to keep.
   void setLeaf(const octomap::OcTreeKey& key, unsigned depth, float log_odds);
 
+  /// octomap's prune() below the node of @p key at @p depth only: every
+  /// node whose eight children are leaves of one value becomes a leaf of
+  /// it, bottom up; each cell keeps its value. Work follows the subtree.
+  /// Returns how many nodes became leaves.
+  size_t pruneBelow(const octomap::OcTreeKey& key, unsigned depth);
+
   /// Deletes the node of @p key at @p depth with everything below it, and
   /// the ancestors left without children (a childless inner node would read
   /// as a coarse leaf). A pruned leaf above @p depth is expanded first, so

@@ -33,6 +33,11 @@ struct MapAccumulatorConfig {
   /// Largest box an update may claim (nx·ny·nz); larger ones are refused
   /// before anything is allocated. As DrawingConfig::max_grid_cells.
   uint64_t max_update_cells = uint64_t{64} << 20;
+  /// Merge eight sibling leaves of one value into their parent in the tiles
+  /// that changed, at each MissionMap::maintain() (octomap_server's
+  /// compress_map): about half the memory and a quarter of the disk, each
+  /// cell's value the same; the fusion costs more (docs/mission.md).
+  bool compress_map = true;
   /// Threads that fuse one update (0: the machine's cores, at most
   /// WorkerPool::kMaxDefaultThreads); the map is the same bit for bit for any number.
   int threads = 0;
@@ -52,6 +57,8 @@ struct MapAccumulatorConfig {
       c.max_extent_m);
     f(numberParameter("max_update_cells", "cells", 1.0, 2147483647.0, "updates claiming a larger box are refused"),
       c.max_update_cells);
+    f(textParameter("compress_map", "merge equal sibling leaves of the changed tiles (octomap_server's compress_map)"),
+      c.compress_map);
     f(numberParameter("threads", "", 0.0, 64.0, "threads that fuse an update (0: the machine's cores, at most 4)"),
       c.threads);
   }
@@ -150,6 +157,11 @@ class MapAccumulator {
   std::vector<Leaf> tileLeaves(const TileIndex& tile) const;
   /// Deletes @p tile's leaves; costs what the tile holds. Returns how many went.
   size_t dropTile(const TileIndex& tile);
+  /// Merges eight sibling leaves of one value into their parent, bottom up,
+  /// inside @p tile (octomap's prune: every cell keeps its value, the map
+  /// takes less memory; clamped free space mostly goes from eight leaves to
+  /// one). Costs what the tile holds. Returns how many nodes became leaves.
+  size_t mergeEqualLeaves(const TileIndex& tile);
   /// Sets leaves, clamped, in tiles that hold nothing (a tile back from disk).
   void insertLeaves(const std::vector<Leaf>& leaves);
   /// The tiles changed since the last call (by updates, clearBox, or leaves

@@ -54,6 +54,25 @@ bool AccumulatingOcTree::dropNode(const octomap::OcTreeKey& key, unsigned depth)
   return true;
 }
 
+size_t AccumulatingOcTree::pruneBelow(const octomap::OcTreeKey& key, unsigned depth) {
+  if (!root || depth > tree_depth) return 0;
+  octomap::OcTreeNode* node = root;
+  for (unsigned d = 0; d < depth; ++d) {
+    const unsigned pos = octomap::computeChildIdx(key, static_cast<int>(tree_depth - 1 - d));
+    if (!nodeChildExists(node, pos)) return 0;  // nothing there, or a coarser leaf
+    node = getNodeChild(node, pos);
+  }
+  size_t merged = 0;
+  // Each level from the leaves' parents up: a node merged at one level may
+  // make its parent mergeable at the next (as prune(), without its early end).
+  for (unsigned level = tree_depth - 1; level + 1 > depth && nodeHasChildren(node); --level) {
+    unsigned pruned = 0;
+    pruneRecurs(node, depth, level, pruned);
+    merged += pruned;
+  }
+  return merged;
+}
+
 octomap::OcTreeNode* AccumulatingOcTree::partRoot(const octomap::OcTreeKey& key, bool* created) {
   bool made = false;
   if (!root) {

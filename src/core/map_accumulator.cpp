@@ -442,6 +442,15 @@ std::vector<MapAccumulator::Leaf> MapAccumulator::tileLeaves(const TileIndex& ti
   return leaves;
 }
 
+size_t MapAccumulator::mergeEqualLeaves(const TileIndex& tile) {
+  if (!tileInKeyRange(tile)) return 0;
+  octomap::OcTreeKey lo, hi;
+  tileKeys(tile, static_cast<int>(tree_->coordToKey(0.0)), &lo, &hi);
+  const size_t merged = tree_->pruneBelow(lo, kTileDepth);
+  inner_stale_ = inner_stale_ || merged > 0;
+  return merged;
+}
+
 size_t MapAccumulator::dropTile(const TileIndex& tile) {
   if (!tileInKeyRange(tile)) return 0;
   octomap::OcTreeKey lo, hi;

@@ -48,27 +48,47 @@ bool MissionMap::integrate(const GridUpdateView& update, std::string* why) {
 
 MaintainResult MissionMap::maintain() {
   MaintainResult result;
+  collectDirtyTiles();
   if (!store_) {
     result.leaves_dropped = live_.prune();
+    mergeChangedTiles(&result);
     return result;
   }
   Eigen::AlignedBox3d window = live_.keptBox();
-  if (window.isEmpty() || live_.config().max_extent_m <= 0.0) return result;
-  const double slack_m = MapAccumulator::kPruneSlack * live_.config().max_extent_m;
-  window = Eigen::AlignedBox3d(window.min().array() - slack_m, window.max().array() + slack_m);
-  collectDirtyTiles();
-  const std::vector<uint64_t> resident(resident_.begin(), resident_.end());
-  for (uint64_t key : resident) {
-    const TileIndex tile = TileStore::unpack(key);
-    if (window.intersects(live_.tileBox(tile))) continue;
-    // Unchanged since the store had it: its copy is current.
-    if (unsaved_.erase(key)) store_->put(tile, live_.tileLeaves(tile));
-    if (live_.dropTile(tile) > 0) ++result.tiles_stored;
-    resident_.erase(key);
-    unpublished_.insert(key);
+  if (!window.isEmpty() && live_.config().max_extent_m > 0.0) {
+    const double slack_m = MapAccumulator::kPruneSlack * live_.config().max_extent_m;
+    window = Eigen::AlignedBox3d(window.min().array() - slack_m, window.max().array() + slack_m);
+    const std::vector<uint64_t> resident(resident_.begin(), resident_.end());
+    for (uint64_t key : resident) {
+      const TileIndex tile = TileStore::unpack(key);
+      if (window.intersects(live_.tileBox(tile))) continue;
+      // Unchanged since the store had it: its copy is current.
+      if (unsaved_.erase(key)) {
+        if (unmerged_.erase(key) && live_.config().compress_map) result.nodes_merged += live_.mergeEqualLeaves(tile);
+        store_->put(tile, live_.tileLeaves(tile));
+      }
+      if (live_.dropTile(tile) > 0) ++result.tiles_stored;
+      resident_.erase(key);
+      unmerged_.erase(key);
+      unpublished_.insert(key);
+    }
   }
-  freed_memory_ = freed_memory_ || result.tiles_stored > 0;
+  mergeChangedTiles(&result);
+  freed_memory_ = freed_memory_ || result.tiles_stored > 0 || result.nodes_merged > 0;
   return result;
+}
+
+void MissionMap::mergeChangedTiles(MaintainResult* result) {
+  if (!live_.config().compress_map) {
+    unmerged_.clear();
+    return;
+  }
+  for (uint64_t key : unmerged_) {
+    const size_t merged = live_.mergeEqualLeaves(TileStore::unpack(key));
+    if (merged > 0) unpublished_.insert(key);  // the outputs encode the tile's new leaves
+    result->nodes_merged += merged;
+  }
+  unmerged_.clear();
 }
 
 bool MissionMap::takeFreedMemory() {
@@ -89,6 +109,7 @@ void MissionMap::collectDirtyTiles() {
   for (const TileIndex& t : live_.takeDirtyTiles()) {
     if (store_) unsaved_.insert(TileStore::pack(t));
     unpublished_.insert(TileStore::pack(t));
+    unmerged_.insert(TileStore::pack(t));
   }
 }
 
@@ -136,6 +157,7 @@ size_t MissionMap::clearBox(const Eigen::Vector3d& W_min, const Eigen::Vector3d&
 
 void MissionMap::reset() {
   live_.reset();
+  unmerged_.clear();
   resident_.clear();
   unsaved_.clear();
   unpublished_.clear();
@@ -145,6 +167,7 @@ void MissionMap::reset() {
 
 void MissionMap::load(const std::string& path) {
   live_.load(path);
+  unmerged_.clear();
   resident_.clear();
   unsaved_.clear();
   unpublished_.clear();

@@ -144,3 +144,47 @@ TEST(AccumulatingOcTree, SiblingsWalkOnFromAPrunedNode) {
   EXPECT_GT(plain.getNumLeafNodes(), 2u) << "the pruned block was not expanded";
   EXPECT_EQ(fullTree(fast), fullTree(plain));
 }
+
+// pruneBelow() is octomap's prune() inside one subtree: a tile's equal
+// siblings merge bottom up (a 16-cell cube of one value to one leaf, a
+// 2x2x2 block to one), the other tile stays as it was, and every cell keeps
+// its value.
+TEST(AccumulatingOcTree, PruneBelowPrunesOneTileOnly) {
+  const double res = 0.25;
+  const int o = 32768, tile = 1 << (16 - 8);  // tiles at depth 8: 64 cells
+  std::mt19937 rng(3);
+  auto fill = [&](int x0, std::vector<octomap::OcTree*> trees) {
+    for (int z = 0; z < 16; ++z)
+      for (int y = 0; y < 16; ++y)
+        for (int x = 0; x < 16; ++x)
+          for (auto* t : trees) t->setNodeValue(octomap::OcTreeKey(o + x0 + x, o + y, o + z), -2.0f, true);
+    for (int i = 0; i < 8; ++i)
+      for (auto* t : trees)
+        t->setNodeValue(octomap::OcTreeKey(o + x0 + 20 + (i & 1), o + ((i >> 1) & 1), o + (i >> 2)), 1.5f, true);
+    for (int i = 0; i < 300; ++i) {
+      const octomap::OcTreeKey k(o + x0 + 24 + rng() % 30, o + rng() % 40, o + rng() % 20);
+      const float v = 0.1f * static_cast<float>(rng() % 20) - 1.0f;
+      for (auto* t : trees) t->setNodeValue(k, v, true);  // lazy: setNodeValue would prune
+    }
+  };
+  AccumulatingOcTree both(res);
+  octomap::OcTree only_a(res), only_b(res);
+  fill(0, {&both, &only_a});
+  fill(tile, {&both, &only_b});
+  const size_t nodes_before = both.size();
+  const size_t merged = both.pruneBelow(octomap::OcTreeKey(o, o, o), 8);
+  only_a.prune();
+  EXPECT_GT(merged, 512u);  // the cube: 512 + 64 + 8 + 1 merges, the block one more
+  EXPECT_EQ(both.size(), nodes_before - 8 * merged);
+  EXPECT_EQ(both.size(), both.calcNumNodes());
+  // Expected: tile A as octomap prunes it alone, tile B untouched.
+  AccumulatingOcTree expected(res);
+  for (const octomap::OcTree* part : {&only_a, &only_b})
+    for (auto it = part->begin_leafs(), end = part->end_leafs(); it != end; ++it)
+      expected.setLeaf(it.getKey(), it.getDepth(), it->getLogOdds());
+  both.updateInnerOccupancy();
+  expected.updateInnerOccupancy();
+  EXPECT_TRUE(fullTree(both) == fullTree(expected)) << "not octomap's prune of tile A alone";
+  EXPECT_EQ(both.pruneBelow(octomap::OcTreeKey(o, o, o), 8), 0u) << "pruned already";
+  EXPECT_EQ(both.pruneBelow(octomap::OcTreeKey(o - 1, o, o), 8), 0u) << "an empty tile";
+}

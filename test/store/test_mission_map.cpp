@@ -168,6 +168,57 @@ TEST(MissionMap, ClearBoxReachesTheTilesOnDisk) {
   EXPECT_EQ(occupiedLeaves(mission.live().tree()), half) << "the live stretch: the same";
 }
 
+// maintain() merges the equal leaves of the tiles that changed: an 8-cell
+// cube of clamped free space becomes one leaf, in RAM and in the store, and
+// each cell keeps its value; with or without a store.
+TEST(MissionMap, MaintainMergesEqualLeaves) {
+  GridUpdate cube;
+  cube.resolution_m = kRes;
+  cube.origin_index = Eigen::Vector3i(8, 8, 0);
+  cube.size = Eigen::Vector3i(8, 8, 8);
+  cube.W_sensor_origin = Eigen::Vector3d(1.0, 1.0, 1.0);
+  cube.run_start = {0};
+  cube.run_length = {512};
+  cube.log_odds.assign(512, -0.4f);
+  for (const bool with_store : {false, true}) {
+    MapAccumulatorConfig windowed;
+    windowed.max_extent_m = 40.0;
+    MissionMap mission(windowed);
+    if (with_store) mission.attachStore(std::make_shared<TileStore>(freshDatabase("merge"), kRes));
+    for (int r = 0; r < 6; ++r) ASSERT_TRUE(mission.integrate(cube));  // clamped at the lower bound
+    ASSERT_EQ(mission.live().tree().getNumLeafNodes(), 512u);
+    const MaintainResult first = mission.maintain();
+    EXPECT_EQ(first.nodes_merged, 64u + 8u + 1u) << "store " << with_store;
+    EXPECT_EQ(mission.live().tree().getNumLeafNodes(), 1u);
+    const float clamped = mission.live().tree().getClampingThresMinLog();
+    for (int i = 0; i < 512; ++i) {
+      const Eigen::Vector3d p = (cube.origin_index + Eigen::Vector3i(i % 8, (i / 8) % 8, i / 64)).cast<double>() * kRes +
+                                Eigen::Vector3d::Constant(kRes / 2);
+      const octomap::OcTreeNode* n = mission.live().tree().search(p.x(), p.y(), p.z());
+      ASSERT_NE(n, nullptr);
+      EXPECT_EQ(n->getLogOdds(), clamped);
+    }
+    EXPECT_EQ(mission.maintain().nodes_merged, 0u) << "nothing changed since";
+    MapAccumulatorConfig uncompressed = windowed;
+    uncompressed.compress_map = false;
+    MissionMap plain(uncompressed);
+    for (int r = 0; r < 6; ++r) ASSERT_TRUE(plain.integrate(cube));
+    EXPECT_EQ(plain.maintain().nodes_merged, 0u);
+    EXPECT_EQ(plain.live().tree().getNumLeafNodes(), 512u) << "compress_map false";
+    if (!with_store) continue;
+    // Away: the tile goes to the store as the one leaf.
+    for (int i = 0; i < 2 * static_cast<int>(MapAccumulator::kPruneOrigins); ++i)
+      ASSERT_TRUE(mission.integrate(singleCell(Eigen::Vector3i(4000 + i % 40, i % 7, i % 3), 0.4f)));
+    EXPECT_GE(mission.maintain().tiles_stored, 1u);
+    ASSERT_TRUE(mission.store()->flush());
+    std::vector<MapAccumulator::Leaf> leaves;
+    ASSERT_TRUE(mission.store()->get(MapAccumulator::TileIndex(0, 0, 0), &leaves));
+    ASSERT_EQ(leaves.size(), 1u);
+    EXPECT_EQ(leaves[0].depth, 13u);
+    EXPECT_EQ(leaves[0].log_odds, clamped);
+  }
+}
+
 // One process per database; a database of another resolution or not of this
 // format is refused with a reason, not overwritten.
 TEST(TileStore, RefusesASecondOpenerAndAnotherResolution) {

@@ -19,6 +19,7 @@ namespace stereo_occupancy {
 struct MaintainResult {
   size_t leaves_dropped = 0;  ///< gone for good (no store): MapAccumulator::prune
   size_t tiles_stored = 0;    ///< moved from RAM to the store
+  size_t nodes_merged = 0;    ///< nodes whose eight equal leaves became one (MapAccumulator::mergeEqualLeaves)
 };
 
 /// MapAccumulator + TileStore. Not thread-safe, as MapAccumulator; the
@@ -46,7 +47,11 @@ class MissionMap {
   /// the update reaches.
   bool integrate(const GridUpdateView& update, std::string* why = nullptr);
   /// Moves the tiles outside the window (MapAccumulator::keptBox, grown by
-  /// kPruneSlack · max_extent_m) to the store; without one, prunes. See takeFreedMemory().
+  /// kPruneSlack · max_extent_m) to the store (their equal leaves merged
+  /// first); without one, prunes. Then, with compress_map, merges the equal
+  /// leaves of the tiles changed since the last call (each cell keeps its
+  /// value; clamped free space takes an eighth of the memory and of the
+  /// store). See takeFreedMemory().
   MaintainResult maintain();
   /// True once after maintain() moved tiles to the store: their memory is
   /// free, but the allocator keeps it from the system until trimHeap().
@@ -105,10 +110,13 @@ class MissionMap {
   std::unordered_set<uint64_t> resident_;  ///< tiles the live map holds (not the store's copy)
   std::unordered_set<uint64_t> unsaved_;   ///< resident tiles changed since their last checkpoint
   std::unordered_set<uint64_t> unpublished_;  ///< tiles changed or gone since takeChangedTiles()
+  std::unordered_set<uint64_t> unmerged_;     ///< live tiles changed since maintain() merged their leaves
   bool all_unpublished_ = true;               ///< the next takeChangedTiles() gives the whole map
   bool freed_memory_ = false;                 ///< maintain() moved tiles since takeFreedMemory()
-  /// Moves the live map's dirty tiles to unsaved_ (with a store) and unpublished_.
+  /// Moves the live map's dirty tiles to unsaved_ (with a store), unpublished_ and unmerged_.
   void collectDirtyTiles();
+  /// MapAccumulator::mergeEqualLeaves for each tile of unmerged_.
+  void mergeChangedTiles(MaintainResult* result);
 };
 
 }  // namespace stereo_occupancy
