@@ -216,6 +216,48 @@ TEST(MissionMap, MaintainMergesEqualLeaves) {
     ASSERT_EQ(leaves.size(), 1u);
     EXPECT_EQ(leaves[0].depth, 13u);
     EXPECT_EQ(leaves[0].log_odds, clamped);
+    // The whole mission's files read back with the merged leaf in them.
+    const std::vector<std::string> paths = mission.saveWhole(::testing::TempDir(), "merged");
+    for (const std::string& path : paths) {
+      std::unique_ptr<octomap::AbstractOcTree> read(octomap::AbstractOcTree::read(path));
+      octomap::OcTree binary(kRes);
+      const bool bt = path.size() > 3 && path.compare(path.size() - 3, 3, ".bt") == 0;
+      if (bt) ASSERT_TRUE(binary.readBinary(path)) << path;
+      else ASSERT_NE(read, nullptr) << path;
+      const octomap::OcTree& tree = bt ? binary : *dynamic_cast<octomap::OcTree*>(read.get());
+      const octomap::OcTreeNode* n = tree.search(2.1, 2.1, 0.1);
+      ASSERT_NE(n, nullptr) << path;
+      EXPECT_FALSE(tree.isNodeOccupied(n)) << path;
+      EXPECT_EQ(tree.getNumLeafNodes(), 1u + 2 * MapAccumulator::kPruneOrigins) << path;
+    }
+  }
+}
+
+// A tile's leaves after merging are its own: octomap's box iterator also
+// hands out the merged leaves of the tile next to it, which a tile row must
+// not carry (the whole mission's files were unreadable with them).
+TEST(MissionMap, MergedTilesKeepTheirOwnLeaves) {
+  // 16 x 8 x 8 cells across the border of tiles 0 and 1 (x = 256 cells, 64 m).
+  static_assert(MapAccumulator::kTileCells == 256, "the cube straddles the first tile border");
+  GridUpdate cube;
+  cube.resolution_m = kRes;
+  cube.origin_index = Eigen::Vector3i(248, 0, 0);
+  cube.size = Eigen::Vector3i(16, 8, 8);
+  cube.W_sensor_origin = Eigen::Vector3d(64.0, 1.0, 1.0);
+  cube.run_start = {0};
+  cube.run_length = {1024};
+  cube.log_odds.assign(1024, -0.4f);
+  MissionMap mission{MapAccumulatorConfig()};
+  for (int r = 0; r < 6; ++r) ASSERT_TRUE(mission.integrate(cube));
+  ASSERT_GT(mission.maintain().nodes_merged, 0u);
+  ASSERT_EQ(mission.live().tree().getNumLeafNodes(), 2u);  // one 8-cell leaf on each side
+  const int offset = static_cast<int>(mission.live().tree().coordToKey(0.0));
+  for (int t = 0; t < 2; ++t) {
+    const std::vector<MapAccumulator::Leaf> leaves = mission.live().tileLeaves(MapAccumulator::TileIndex(t, 0, 0));
+    ASSERT_EQ(leaves.size(), 1u) << "tile " << t;
+    const int x = static_cast<int>(leaves[0].key[0]) - offset;
+    EXPECT_GE(x, t * MapAccumulator::kTileCells) << "tile " << t;
+    EXPECT_LT(x, (t + 1) * MapAccumulator::kTileCells) << "tile " << t;
   }
 }
 

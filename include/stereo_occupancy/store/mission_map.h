@@ -53,7 +53,7 @@ class MissionMap {
   /// value; clamped free space takes an eighth of the memory and of the
   /// store). See takeFreedMemory().
   MaintainResult maintain();
-  /// True once after maintain() moved tiles to the store: their memory is
+  /// True once after maintain() moved tiles to the store or merged leaves: their memory is
   /// free, but the allocator keeps it from the system until trimHeap().
   bool takeFreedMemory();
   /// Gives the allocator's free pages back to the system (glibc's
@@ -112,7 +112,7 @@ class MissionMap {
   std::unordered_set<uint64_t> unpublished_;  ///< tiles changed or gone since takeChangedTiles()
   std::unordered_set<uint64_t> unmerged_;     ///< live tiles changed since maintain() merged their leaves
   bool all_unpublished_ = true;               ///< the next takeChangedTiles() gives the whole map
-  bool freed_memory_ = false;                 ///< maintain() moved tiles since takeFreedMemory()
+  bool freed_memory_ = false;                 ///< maintain() moved tiles or merged leaves since takeFreedMemory()
   /// Moves the live map's dirty tiles to unsaved_ (with a store), unpublished_ and unmerged_.
   void collectDirtyTiles();
   /// MapAccumulator::mergeEqualLeaves for each tile of unmerged_.
