@@ -41,6 +41,21 @@ std::string fileBytes(const std::string& path) {
   return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
 }
 
+/// An update that sets every cell of the box at @p origin_index of @p size
+/// to @p log_odds, seen from its lower corner.
+GridUpdate filledBox(const Eigen::Vector3i& origin_index, const Eigen::Vector3i& size, float log_odds) {
+  GridUpdate u;
+  u.resolution_m = kRes;
+  u.origin_index = origin_index;
+  u.size = size;
+  u.W_sensor_origin = origin_index.cast<double>() * kRes;
+  const uint32_t cells = static_cast<uint32_t>(size.prod());
+  u.run_start = {0};
+  u.run_length = {cells};
+  u.log_odds.assign(cells, log_odds);
+  return u;
+}
+
 /// Cells with positive log-odds in @p tree.
 size_t occupiedLeaves(const octomap::OcTree& tree) {
   size_t n = 0;
@@ -172,14 +187,7 @@ TEST(MissionMap, ClearBoxReachesTheTilesOnDisk) {
 // cube of clamped free space becomes one leaf, in RAM and in the store, and
 // each cell keeps its value; with or without a store.
 TEST(MissionMap, MaintainMergesEqualLeaves) {
-  GridUpdate cube;
-  cube.resolution_m = kRes;
-  cube.origin_index = Eigen::Vector3i(8, 8, 0);
-  cube.size = Eigen::Vector3i(8, 8, 8);
-  cube.W_sensor_origin = Eigen::Vector3d(1.0, 1.0, 1.0);
-  cube.run_start = {0};
-  cube.run_length = {512};
-  cube.log_odds.assign(512, -0.4f);
+  const GridUpdate cube = filledBox(Eigen::Vector3i(8, 8, 0), Eigen::Vector3i(8, 8, 8), -0.4f);
   for (const bool with_store : {false, true}) {
     MapAccumulatorConfig windowed;
     windowed.max_extent_m = 40.0;
@@ -239,14 +247,7 @@ TEST(MissionMap, MaintainMergesEqualLeaves) {
 TEST(MissionMap, MergedTilesKeepTheirOwnLeaves) {
   // 16 x 8 x 8 cells across the border of tiles 0 and 1 (x = 256 cells, 64 m).
   static_assert(MapAccumulator::kTileCells == 256, "the cube straddles the first tile border");
-  GridUpdate cube;
-  cube.resolution_m = kRes;
-  cube.origin_index = Eigen::Vector3i(248, 0, 0);
-  cube.size = Eigen::Vector3i(16, 8, 8);
-  cube.W_sensor_origin = Eigen::Vector3d(64.0, 1.0, 1.0);
-  cube.run_start = {0};
-  cube.run_length = {1024};
-  cube.log_odds.assign(1024, -0.4f);
+  const GridUpdate cube = filledBox(Eigen::Vector3i(248, 0, 0), Eigen::Vector3i(16, 8, 8), -0.4f);
   MissionMap mission{MapAccumulatorConfig()};
   for (int r = 0; r < 6; ++r) ASSERT_TRUE(mission.integrate(cube));
   ASSERT_GT(mission.maintain().nodes_merged, 0u);
