@@ -379,8 +379,8 @@ void tileKeys(const MapAccumulator::TileIndex& tile, int offset, octomap::OcTree
   }
 }
 /// True if @p key lies in [lo, hi] on every axis. octomap 1.9's
-/// leaf_bbx_iterator also hands out coarse leaves (of merged equal leaves)
-/// next to the box: a tile's leaves are filtered by it.
+/// leaf_bbx_iterator also hands out a coarse leaf (merged equal leaves)
+/// that ends just before the box: a tile's leaves are filtered by it.
 bool keyInside(const octomap::OcTreeKey& key, const octomap::OcTreeKey& lo, const octomap::OcTreeKey& hi) {
   for (int a = 0; a < 3; ++a)
     if (key[a] < lo[a] || key[a] > hi[a]) return false;

@@ -281,6 +281,17 @@ std::pair<octomap::OcTreeKey, octomap::OcTreeKey> blockKeys(const octomap::OcTre
   return {key(lo), key(lo + Eigen::Vector3i::Constant(kBlock - 1))};
 }
 
+/// True if the leaf at @p it overlaps the keys [lo, hi]: octomap 1.9's
+/// leaf_bbx_iterator also hands out a coarse leaf that ends just before the box.
+bool leafOverlaps(const octomap::OcTree::leaf_bbx_iterator& it, unsigned tree_depth, const octomap::OcTreeKey& lo,
+                  const octomap::OcTreeKey& hi) {
+  const octomap::OcTreeKey first = it.getIndexKey();
+  const int side = 1 << (tree_depth - it.getDepth());
+  for (int a = 0; a < 3; ++a)
+    if (first[a] + side - 1 < lo[a] || first[a] > hi[a]) return false;
+  return true;
+}
+
 /// Empties @p markers; for the whole map (@p all) a DELETEALL first.
 void startBlockMarkers(bool all, const std_msgs::Header& header, visualization_msgs::MarkerArray* markers) {
   markers->markers.clear();
@@ -354,7 +365,7 @@ void freeBlockMarkers(const octomap::OcTree& tree, const std::vector<Eigen::Vect
     }
     const auto [key_lo, key_hi] = blockKeys(tree, b);
     for (auto it = tree.begin_leafs_bbx(key_lo, key_hi), end = tree.end_leafs_bbx(); it != end; ++it) {
-      if (tree.isNodeOccupied(*it)) continue;
+      if (tree.isNodeOccupied(*it) || !leafOverlaps(it, depth, key_lo, key_hi)) continue;
       const int side = 1 << (depth - it.getDepth());
       geometry_msgs::Point p;
       if (side >= kBlock) {  // the leaf covers the block: draw the block

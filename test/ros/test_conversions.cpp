@@ -299,6 +299,20 @@ TEST(Conversions, FreeBlockMarkers) {
   EXPECT_DOUBLE_EQ(whole.points[0].x, 10.0);  // the block's centre
   EXPECT_DOUBLE_EQ(whole.scale.x, 4.0);
   for (int s = 10; s < 15; ++s) EXPECT_EQ(markers.markers[s].action, visualization_msgs::Marker::DELETE);
+  // Next to a pruned 8-cell leaf at the end of block (2, 0, 0), blocks
+  // (1, 0, 0) and (3, 0, 0) hold nothing (octomap 1.9's box iterator also
+  // hands out a coarse leaf that ends just before the box).
+  octomap::OcTree beside(0.25);
+  for (int i = 0; i < 512; ++i)
+    beside.updateNode(octomap::point3d(10.125f + 0.25f * (i % 8), 0.125f + 0.25f * ((i / 8) % 8), 0.125f + 0.25f * (i / 64)),
+                      false);
+  beside.prune();
+  ASSERT_EQ(beside.getNumLeafNodes(), 1u);
+  for (const auto& b : {Eigen::Vector3i(1, 0, 0), Eigen::Vector3i(3, 0, 0)}) {
+    freeBlockMarkers(beside, {b}, false, header, &markers);
+    ASSERT_EQ(markers.markers.size(), 5u);
+    for (const auto& m : markers.markers) EXPECT_EQ(m.action, visualization_msgs::Marker::DELETE) << m.ns;
+  }
   freeBlockMarkers(tree, {Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(5, 5, 5)}, true, header, &markers);
   ASSERT_EQ(markers.markers.size(), 2u);
   EXPECT_EQ(markers.markers[0].action, visualization_msgs::Marker::DELETEALL);
