@@ -84,6 +84,10 @@ Eigen::Vector3i unpackBlock(uint64_t p) {
 int floorDiv(int g, int n) { return g >= 0 ? g / n : -((-g + n - 1) / n); }
 int blockOf(int g) { return floorDiv(g, MapAccumulator::kBlockCells); }
 int tileOfBlock(int b) { return floorDiv(b, MapAccumulator::kTileCells / MapAccumulator::kBlockCells); }
+/// The packed TileIndex of the tile that block @p b lies in.
+uint64_t packedTileOf(const Eigen::Vector3i& b) {
+  return packBlock(Eigen::Vector3i(tileOfBlock(b.x()), tileOfBlock(b.y()), tileOfBlock(b.z())));
+}
 
 }  // namespace
 
@@ -205,7 +209,7 @@ size_t MapAccumulator::clearBox(const Eigen::Vector3d& W_min, const Eigen::Vecto
     tree_->setNodeValue(k, cleared, /*lazy_eval=*/true);
     const Eigen::Vector3i b(blockOf(k[0] - offset), blockOf(k[1] - offset), blockOf(k[2] - offset));
     if (!all_changed_) changed_blocks_.insert(packBlock(b));  // the outputs redo these blocks only
-    dirty_tiles_.insert(packBlock(Eigen::Vector3i(tileOfBlock(b.x()), tileOfBlock(b.y()), tileOfBlock(b.z()))));
+    dirty_tiles_.insert(packedTileOf(b));
   }
   inner_stale_ = inner_stale_ || !cells.empty();
   return cells.size();
@@ -280,7 +284,7 @@ void MapAccumulator::fuseInOrder(const GridUpdateView& update) {
     const uint64_t block = packBlock(b);
     if (block != last_block) {
       if (!all_changed_) changed_blocks_.insert(block);
-      dirty_tiles_.insert(packBlock(Eigen::Vector3i(tileOfBlock(b.x()), tileOfBlock(b.y()), tileOfBlock(b.z()))));
+      dirty_tiles_.insert(packedTileOf(b));
       last_block = block;
     }
   });
@@ -324,7 +328,7 @@ void MapAccumulator::fuseInParts(const GridUpdateView& update) {
   for (const uint64_t block : f.part_block) {
     if (!all_changed_) changed_blocks_.insert(block);
     const Eigen::Vector3i b = unpackBlock(block);
-    dirty_tiles_.insert(packBlock(Eigen::Vector3i(tileOfBlock(b.x()), tileOfBlock(b.y()), tileOfBlock(b.z()))));
+    dirty_tiles_.insert(packedTileOf(b));
   }
 }
 
