@@ -21,6 +21,7 @@ for p in python3-matplotlib python3-diagnostic-msgs; do
   dpkg -s "$p" > /dev/null 2>&1 || apt-get install -y -qq "$p" > /dev/null 2>&1
 done
 mkdir -p "$out"
+out="$(cd "$out" && pwd)"  # roslaunch runs its nodes in ~/.ros: no relative paths
 bin="$ws/devel/lib/stereo_occupancy"
 
 bag="$out/mission_${duration}s.bag"

@@ -53,8 +53,13 @@ class OctomapAccumulator : public nodelet::Nodelet {
   /// mutex_, encoded outside it) and returns the map's header. Requires
   /// snapshot_mutex_, not mutex_.
   std_msgs::Header refreshSnapshot();
-  /// The marker arrays of the blocks changed since the last publish; requires mutex_.
-  void publishChangedBlocks(const octomap::OcTree& tree, const std_msgs::Header& header);
+  /// The marker arrays of the blocks changed since the last publish (null:
+  /// nobody listens or nothing changed).
+  struct ChangedBlockMarkers {
+    visualization_msgs::MarkerArrayPtr occupied, free;
+  };
+  /// Builds them from the live tree; requires mutex_ (publish them after it is let go).
+  ChangedBlockMarkers changedBlockMarkers(const octomap::OcTree& tree, const std_msgs::Header& header);
   bool saveMap(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response);
   bool clearBox(BoundingBoxQuery::Request& request, BoundingBoxQuery::Response&);
   /// The map on request: binary (octomap_binary) or with log-odds (octomap_full).
@@ -83,6 +88,9 @@ class OctomapAccumulator : public nodelet::Nodelet {
   bool full_changed_ = true;           ///< ... since the whole-map outputs went out
   ros::WallTime last_full_publish_;    ///< when they went out; zero: never
 
+  /// Taken first by each publish, so that two never interleave their
+  /// messages once the fusion lock is let go.
+  std::mutex publish_mutex_;
   /// Guards snapshot_; taken before mutex_ when both are: the whole-map
   /// outputs are built from it while the fusion goes on.
   std::mutex snapshot_mutex_;
@@ -210,10 +218,14 @@ OctomapAccumulator::~OctomapAccumulator() {
   if (!fusion_ || params_.save_dir.empty()) return;
   if (fusion_->map().updates() == 0) return;
   try {
-    // On stderr: rosconsole may be gone at shutdown.
-    for (const auto& path : save(lock))
-      std::fprintf(stderr, "OctomapAccumulator: saved the map of %lu updates to %s on shutdown\n",
-                   static_cast<unsigned long>(fusion_->map().updates()), path.c_str());
+    // On stderr: rosconsole may be gone at shutdown. The time tells how much
+    // of roslaunch's wait before SIGTERM (--sigint-timeout, 15 s) it took.
+    const auto start = std::chrono::steady_clock::now();
+    const std::vector<std::string> paths = save(lock);
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    for (const auto& path : paths)
+      std::fprintf(stderr, "OctomapAccumulator: saved the map of %lu updates to %s on shutdown (%.1f s)\n",
+                   static_cast<unsigned long>(fusion_->map().updates()), path.c_str(), seconds);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "OctomapAccumulator: could not save the map on shutdown (the previous map file stays): %s\n", e.what());
   }
@@ -282,6 +294,9 @@ void OctomapAccumulator::publishOutputs() {
   const auto wanted = [](const ros::Publisher& pub) { return pub.getNumSubscribers() > 0; };
   const bool anyone = wanted(octomap_pub_) || wanted(octomap_full_pub_) || wanted(markers_pub_) ||
                       wanted(free_markers_pub_) || wanted(cloud_pub_) || wanted(projected_pub_);
+  std::lock_guard<std::mutex> publishing(publish_mutex_);
+  ChangedBlockMarkers markers;
+  bool full_due = false;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     if (!anyone) {
@@ -292,15 +307,20 @@ void OctomapAccumulator::publishOutputs() {
     // The whole map at most every full_map_period_s, the changed blocks at
     // each publish: a large map's octree and cloud would cost more than its changes.
     const ros::WallTime now = ros::WallTime::now();
-    const bool full_due = full_changed_ && (last_full_publish_.isZero() || now < last_full_publish_ ||
-                                            (now - last_full_publish_).toSec() >= params_.full_map_period_s);
+    full_due = full_changed_ && (last_full_publish_.isZero() || now < last_full_publish_ ||
+                                 (now - last_full_publish_).toSec() >= params_.full_map_period_s);
     if (!changed_since_publish_ && !full_due) return;
     changed_since_publish_ = false;
-    publishChangedBlocks(fusion_->map().tree(), mapHeader());
-    if (!full_due) return;
-    full_changed_ = false;
-    last_full_publish_ = now;
+    markers = changedBlockMarkers(fusion_->map().tree(), mapHeader());
+    if (full_due) {
+      full_changed_ = false;
+      last_full_publish_ = now;
+    }
   }
+  // publish() serialises for subscribers in other processes: outside the fusion lock.
+  if (markers.occupied) markers_pub_.publish(markers.occupied);
+  if (markers.free) free_markers_pub_.publish(markers.free);
+  if (!full_due) return;
   publishWholeMap();
   // The whole map's messages and the snapshot's encoding freed tens of MB
   // of small blocks: back to the system now, not at the next eviction.
@@ -345,27 +365,28 @@ std_msgs::Header OctomapAccumulator::refreshSnapshot() {
   return header;
 }
 
-void OctomapAccumulator::publishChangedBlocks(const octomap::OcTree& tree, const std_msgs::Header& header) {
+OctomapAccumulator::ChangedBlockMarkers OctomapAccumulator::changedBlockMarkers(const octomap::OcTree& tree,
+                                                                                const std_msgs::Header& header) {
   const auto wanted = [](const ros::Publisher& pub) { return pub.getNumSubscribers() > 0; };
   const bool free_wanted = params_.publish_free_space && wanted(free_markers_pub_);
+  ChangedBlockMarkers markers;
   if (!wanted(markers_pub_) && !free_wanted) {
     fusion_->markAllChanged();  // nobody to send changes to: the next subscriber gets the whole map
-    return;
+    return markers;
   }
   // Both marker arrays from the one set of changed blocks.
   bool all = false;
   const std::vector<MapAccumulator::BlockIndex> blocks = fusion_->takeChangedBlocks(&all);
-  if (!all && blocks.empty()) return;
+  if (!all && blocks.empty()) return markers;
   if (wanted(markers_pub_)) {
-    auto msg = boost::make_shared<visualization_msgs::MarkerArray>();
-    blockMarkers(tree, blocks, all, header, msg.get());
-    markers_pub_.publish(msg);
+    markers.occupied = boost::make_shared<visualization_msgs::MarkerArray>();
+    blockMarkers(tree, blocks, all, header, markers.occupied.get());
   }
   if (free_wanted) {
-    auto msg = boost::make_shared<visualization_msgs::MarkerArray>();
-    freeBlockMarkers(tree, blocks, all, header, msg.get());
-    free_markers_pub_.publish(msg);
+    markers.free = boost::make_shared<visualization_msgs::MarkerArray>();
+    freeBlockMarkers(tree, blocks, all, header, markers.free.get());
   }
+  return markers;
 }
 
 bool OctomapAccumulator::getMap(bool binary, GetOctomap::Request&, GetOctomap::Response& response) {
