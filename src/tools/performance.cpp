@@ -119,7 +119,7 @@ int flightPath(const std::string& scenario_name, long pace_ms, int threads) {
 }
 
 const char* kStages =
-    "line, line_pyramid, raytrace, raytrace_pyramid, line_pyramid_bounded, raytrace_pyramid_bounded, blur, "
+    "line, line_pyramid, raytrace, raytrace_pyramid, line_pyramid_bounded, raytrace_pyramid_bounded, default, blur, "
     "encode, fusion, octomap";
 
 int run(int argc, char** argv) {
@@ -204,6 +204,21 @@ int run(int argc, char** argv) {
         [&] { drawer.drawInto(image, T_W_C, &grid); });
     if (algorithm == so::DrawingAlgorithm::kLinePyramid) line_pyramid_ms = t.median();
     row(name, t, "pyramids + drawing");
+  }
+  // The mapper's default as the mapper draws it (the rows above: the sensor
+  // model's own default, the paper's profile), against the paper's pyramid.
+  if (wanted("default")) {
+    so::DrawingConfig config = so::DrawingConfig::mapperDefaults();
+    config.resolution_m = resolution;
+    config.threads = threads;
+    so::DisparityDrawer drawer(camera, config);
+    so::LocalGrid grid;
+    const Timing t = timeIt(repeat, [&] { drawer.prepareGrid(T_W_C, &grid); },
+                            [&] { drawer.drawInto(image, T_W_C, &grid); });
+    std::ostringstream what;
+    what << "pyramids + drawing + the sky guard, " << so::toString(config.algorithm) << " with the surface profile";
+    if (line_pyramid_ms > 0.0) what << "; " << std::setprecision(3) << t.median() / line_pyramid_ms << "x line_pyramid";
+    row("default", t, what.str());
   }
 
   if (!(only.empty() || only == "blur" || only == "encode" || only == "fusion" || only == "octomap")) return 0;
