@@ -14,6 +14,7 @@
 #endif
 
 #include "stereo_occupancy/stereo_camera_model.h"
+#include "stereo_occupancy/worker_pool.h"
 
 namespace stereo_occupancy {
 
@@ -75,10 +76,14 @@ class LocalGrid {
   /// Sets the cells holding exactly @p value within @p radius cells
   /// (Chebyshev) of an occupied cell (log-odds > 0) to 0, no information;
   /// returns how many. With value = the sky's log-odds: a ray that measured
-  /// no range says nothing next to what the image did measure.
-  size_t silenceNearOccupied(float value, int radius);
+  /// no range says nothing next to what the image did measure. With a
+  /// @p pool, slabs of z on its workers: the same grid and count.
+  size_t silenceNearOccupied(float value, int radius, WorkerPool* pool = nullptr);
 
  private:
+  /// silenceNearOccupied() for the occupied cells in the slabs [z_begin, z_end).
+  size_t silenceSlabs(float value, int radius, int z_begin, int z_end);
+
   Eigen::Vector3i origin_index_ = Eigen::Vector3i::Zero();
   Eigen::Vector3i size_ = Eigen::Vector3i::Zero();
   double resolution_m_ = 1.0;

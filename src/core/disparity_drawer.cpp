@@ -165,8 +165,7 @@ DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::
       break;
     case DrawingAlgorithm::kLinePyramidBounded:
     case DrawingAlgorithm::kRayTracePyramidBounded:
-      min_pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel());
-      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel());
+      buildMinAndMaxPyramids(disparity);
       if (config_.algorithm == DrawingAlgorithm::kLinePyramidBounded)
         line_drawer_.drawPyramidBounded(min_pyramid_, max_pyramid_, *bound_, T_W_C, grid, &stats);
       else
@@ -174,9 +173,25 @@ DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::
       break;
   }
   if (config_.sensor_model.profile == SensorProfile::kSurface)
-    grid->silenceNearOccupied(table_.skyLogOdds(), config_.sensor_model.sky_guard_cells);
+    grid->silenceNearOccupied(table_.skyLogOdds(), config_.sensor_model.sky_guard_cells, workers_.get());
   if (config_.count_different_cells) stats.different_grid_cells = grid->countKnown();
   return stats;
+}
+
+void DisparityDrawer::buildMinAndMaxPyramids(const cv::Mat& disparity) {
+  // Two pyramids of their own: one per worker where there are two.
+  const auto build = [&](size_t which, unsigned) {
+    if (which == 0)
+      min_pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel());
+    else
+      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel());
+  };
+  if (workers_) {
+    workers_->run(2, build);
+  } else {
+    build(0, 0);
+    build(1, 0);
+  }
 }
 
 void DisparityDrawer::blur(const Eigen::Isometry3d& T_W_C, LocalGrid* grid) { blur_.apply(T_W_C.translation(), grid); }

@@ -18,8 +18,32 @@ void LocalGrid::reset(const Eigen::Vector3i& origin_index, const Eigen::Vector3i
 
 void LocalGrid::clear() { std::fill(data_.begin(), data_.end(), kUnknown); }
 
-size_t LocalGrid::silenceNearOccupied(float value, int radius) {
+size_t LocalGrid::silenceNearOccupied(float value, int radius, WorkerPool* pool) {
   if (radius <= 0) return 0;
+  const unsigned workers = pool ? pool->size() : 1;
+  // Two chunks of slabs per worker, each at least 2·radius + 1 thick: the
+  // even chunks first, then the odd ones, so that no two chunks running at
+  // once reach the same cell (a chunk writes radius slabs beyond its ends).
+  // A cell is silenced whoever sees it first: the grid and the count do not
+  // depend on the order.
+  const int min_slabs = 2 * radius + 1;
+  const int chunk_slabs = std::max(min_slabs, (size_.z() + 2 * static_cast<int>(workers) - 1) /
+                                                  (2 * static_cast<int>(workers)));
+  const int chunks = (size_.z() + chunk_slabs - 1) / chunk_slabs;
+  if (workers == 1 || chunks < 2) return silenceSlabs(value, radius, 0, size_.z());
+  std::vector<size_t> silenced(static_cast<size_t>(chunks), 0);
+  for (int parity = 0; parity < 2; ++parity)
+    pool->run(static_cast<size_t>(chunks - parity + 1) / 2, [&](size_t i, unsigned) {
+      const int chunk = 2 * static_cast<int>(i) + parity;
+      const int z_begin = chunk * chunk_slabs;
+      silenced[chunk] = silenceSlabs(value, radius, z_begin, std::min(size_.z(), z_begin + chunk_slabs));
+    });
+  size_t total = 0;
+  for (size_t n : silenced) total += n;
+  return total;
+}
+
+size_t LocalGrid::silenceSlabs(float value, int radius, int z_begin, int z_end) {
   size_t silenced = 0;
   auto silenceAround = [&](int x, int y, int z) {
     for (int k = std::max(0, z - radius); k <= std::min(size_.z() - 1, z + radius); ++k)
@@ -32,7 +56,7 @@ size_t LocalGrid::silenceNearOccupied(float value, int radius) {
           }
         }
   };
-  for (int z = 0; z < size_.z(); ++z)
+  for (int z = z_begin; z < z_end; ++z)
     for (int y = 0; y < size_.y(); ++y) {
       const float* row = &data_[linearIndex(0, y, z)];
       for (int x = 0; x < size_.x(); ++x) {

@@ -512,6 +512,62 @@ TEST(Drawing, ThreadCountsDrawTheSameGrids) {
   }
 }
 
+// The mapper's default (the bounded pyramid with the surface profile and its
+// sky guard): its two pyramids and the sky guard on the workers draw the
+// same grid as one thread.
+TEST(Drawing, ThreadCountsDrawTheSameDefaultGrids) {
+  const StereoCameraConfig cam_cfg;
+  const EquivalenceFrames frames = equivalenceFrames(cam_cfg);
+  for (int guard : {1, 2}) {
+    DrawingConfig c = DrawingConfig::mapperDefaults();
+    c.sensor_model.sky_guard_cells = guard;
+    c.threads = 1;
+    DisparityDrawer one(cam_cfg, c);
+    for (int threads : {2, 3, 5}) {
+      c.threads = threads;
+      DisparityDrawer many(cam_cfg, c);
+      for (size_t p = 0; p < frames.poses.size(); ++p) {
+        LocalGrid a, b;
+        one.draw(frames.images[p], frames.poses[p], &a);
+        many.draw(frames.images[p], frames.poses[p], &b);
+        const std::string what = "guard " + std::to_string(guard) + " threads " + std::to_string(threads) +
+                                 " pose " + std::to_string(p);
+        ASSERT_EQ(b.numCells(), a.numCells()) << what;
+        EXPECT_EQ(std::memcmp(b.data(), a.data(), a.numCells() * sizeof(float)), 0) << what;
+      }
+    }
+  }
+}
+
+// The sky guard on a pool's workers silences the same cells, and as many.
+TEST(Drawing, SkyGuardOnWorkersSilencesTheSameCells) {
+  const StereoCameraConfig cam_cfg;
+  const EquivalenceFrames frames = equivalenceFrames(cam_cfg);
+  DrawingConfig c = DrawingConfig::mapperDefaults();
+  c.sensor_model.sky_guard_cells = 0;  // the guard below, by hand
+  DisparityDrawer drawer(cam_cfg, c);
+  const float sky = LogOddsTable(InverseSensorModel(c.sensor_model), c.resolution_m).skyLogOdds();
+  size_t silenced_in_all = 0;
+  for (size_t p = 0; p < frames.poses.size(); ++p) {
+    LocalGrid drawn;
+    drawer.draw(frames.images[p], frames.poses[p], &drawn);
+    for (int radius : {1, 2}) {
+      LocalGrid alone = drawn;
+      const size_t expected = alone.silenceNearOccupied(sky, radius);
+      silenced_in_all += expected;
+      for (unsigned threads : {2u, 3u, 5u}) {
+        WorkerPool pool(threads);
+        LocalGrid shared = drawn;
+        const std::string what =
+            "pose " + std::to_string(p) + " radius " + std::to_string(radius) + " threads " + std::to_string(threads);
+        EXPECT_EQ(shared.silenceNearOccupied(sky, radius, &pool), expected) << what;
+        EXPECT_EQ(std::memcmp(shared.data(), alone.data(), alone.numCells() * sizeof(float)), 0) << what;
+      }
+    }
+  }
+  EXPECT_GT(silenced_in_all, 1000u) << "the frames must put sky next to hits";
+}
+
 // Table I's shape: the pyramid reads far fewer pixels and draws far fewer
 // cells for nearly the same map; counters have the paper's meaning.
 TEST(Drawing, Table1Counters) {
