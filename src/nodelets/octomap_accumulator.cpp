@@ -317,9 +317,14 @@ void OctomapAccumulator::publishOutputs() {
       last_full_publish_ = now;
     }
   }
-  // publish() serialises for subscribers in other processes: outside the fusion lock.
-  if (markers.occupied) markers_pub_.publish(markers.occupied);
-  if (markers.free) free_markers_pub_.publish(markers.free);
+  // publish() serialises for subscribers in other processes: outside the
+  // fusion lock. A failure here must not cost the whole map its turn.
+  try {
+    if (markers.occupied) markers_pub_.publish(markers.occupied);
+    if (markers.free) free_markers_pub_.publish(markers.free);
+  } catch (const std::exception& e) {
+    NODELET_ERROR_THROTTLE(kWarnThrottleS, "could not publish the changed blocks' markers: %s", e.what());
+  }
   if (!full_due) return;
   publishWholeMap();
   // The whole map's messages and the snapshot's encoding freed tens of MB
