@@ -128,8 +128,6 @@ class DisparityDrawer {
 
  private:
   void checkInput(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C) const;
-  /// The bounded pyramids' two (eqs. 14, 16), on two workers when there are.
-  void buildMinAndMaxPyramids(const cv::Mat& disparity);
 
   StereoCameraModel camera_;
   DrawingConfig config_;

@@ -14,6 +14,7 @@
 #include "stereo_occupancy/integer_math.h"
 #include "stereo_occupancy/inverse_sensor_model.h"
 #include "stereo_occupancy/stereo_camera_model.h"
+#include "stereo_occupancy/worker_pool.h"
 
 namespace stereo_occupancy {
 
@@ -36,8 +37,11 @@ class DisparityPyramid {
   static constexpr float kInvalidMin = std::numeric_limits<float>::infinity();
   static constexpr float kInvalidMax = -1.0f;
 
-  /// Builds levels 0..top_level from a CV_32FC1 disparity image [px].
-  void build(const cv::Mat& disparity, const StereoCameraModel& camera, PyramidType type, int top_level);
+  /// Builds levels 0..top_level from a CV_32FC1 disparity image [px]; with
+  /// a @p pool, the pass over the image in bands of rows on its workers (the
+  /// same pyramid).
+  void build(const cv::Mat& disparity, const StereoCameraModel& camera, PyramidType type, int top_level,
+             WorkerPool* pool = nullptr);
 
   PyramidType type() const { return type_; }
   int topLevel() const { return static_cast<int>(levels_.size()) - 1; }

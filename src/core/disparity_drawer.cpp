@@ -152,20 +152,21 @@ DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::
       line_drawer_.drawImage(disparity, T_W_C, grid, &stats);
       break;
     case DrawingAlgorithm::kLinePyramid:
-      min_pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel());
+      min_pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel(), workers_.get());
       line_drawer_.drawPyramid(min_pyramid_, T_W_C, grid, &stats);
       break;
     case DrawingAlgorithm::kRayTrace:
-      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, 0);  // level 0: the image as is
+      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, 0, workers_.get());  // level 0: the image as is
       ray_tracer_.drawImage(max_pyramid_, T_W_C, grid, &stats);
       break;
     case DrawingAlgorithm::kRayTracePyramid:
-      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel());
+      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel(), workers_.get());
       ray_tracer_.drawPyramid(max_pyramid_, T_W_C, grid, &stats);
       break;
     case DrawingAlgorithm::kLinePyramidBounded:
     case DrawingAlgorithm::kRayTracePyramidBounded:
-      buildMinAndMaxPyramids(disparity);
+      min_pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel(), workers_.get());
+      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel(), workers_.get());
       if (config_.algorithm == DrawingAlgorithm::kLinePyramidBounded)
         line_drawer_.drawPyramidBounded(min_pyramid_, max_pyramid_, *bound_, T_W_C, grid, &stats);
       else
@@ -176,22 +177,6 @@ DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::
     grid->silenceNearOccupied(table_.skyLogOdds(), config_.sensor_model.sky_guard_cells, workers_.get());
   if (config_.count_different_cells) stats.different_grid_cells = grid->countKnown();
   return stats;
-}
-
-void DisparityDrawer::buildMinAndMaxPyramids(const cv::Mat& disparity) {
-  // Two pyramids of their own: one per worker where there are two.
-  const auto build = [&](size_t which, unsigned) {
-    if (which == 0)
-      min_pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel());
-    else
-      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel());
-  };
-  if (workers_) {
-    workers_->run(2, build);
-  } else {
-    build(0, 0);
-    build(1, 0);
-  }
 }
 
 void DisparityDrawer::blur(const Eigen::Isometry3d& T_W_C, LocalGrid* grid) { blur_.apply(T_W_C.translation(), grid); }

@@ -30,13 +30,13 @@ struct MaxDisparity {  // eq. 16
 /// Level 0 (the sanitised input) and level 1 in one pass over the input:
 /// each pair of input rows is sanitised into level 0 and reduced into a row
 /// of level 1 while it is in registers, with Reduction::op, four lanes at a
-/// time with Reduction::op4. NaN, negative and out-of-range values carry no
-/// information.
+/// time with Reduction::op4, for the rows [y_begin, y_end) of level 1. NaN,
+/// negative and out-of-range values carry no information.
 template <typename Reduction>
 void sanitiseAndReduce(const cv::Mat& disparity, StereoCameraModel::DisparityValidity valid, float invalid,
-                       cv::Mat* d0, cv::Mat* d1) {
+                       int y_begin, int y_end, cv::Mat* d0, cv::Mat* d1) {
   const int cols = disparity.cols, rows = disparity.rows;
-  const int w = (cols + 1) / 2, h = (rows + 1) / 2;
+  const int w = (cols + 1) / 2;
   const int full = cols / 2;  // blocks with two columns
   auto sanitise = [&](float d) { return valid(d) ? d : invalid; };
 #if defined(__SSE2__)
@@ -50,7 +50,7 @@ void sanitiseAndReduce(const cv::Mat& disparity, StereoCameraModel::DisparityVal
     return v;
   };
 #endif
-  for (int y = 0; y < h; ++y) {
+  for (int y = y_begin; y < y_end; ++y) {  // rows of level 1
     const bool two_rows = 2 * y + 1 < rows;  // an odd last row pairs with itself
     const float* in0 = disparity.ptr<float>(2 * y);
     const float* in1 = two_rows ? disparity.ptr<float>(2 * y + 1) : in0;
@@ -81,10 +81,29 @@ void sanitiseAndReduce(const cv::Mat& disparity, StereoCameraModel::DisparityVal
   }
 }
 
+/// Level-1 rows (or level-0 rows) per part of the first pass on a pool: a
+/// part reads and writes tens of kB, more than a part's hand-out costs.
+constexpr int kRowsPerPart = 16;
+
+/// Calls part(y_begin, y_end) over [0, rows): on the pool's workers in bands
+/// of rows where there are several, else at once.
+template <typename Part>
+void inRowBands(int rows, WorkerPool* pool, const Part& part) {
+  const int parts = pool ? std::min(rows / kRowsPerPart, 2 * static_cast<int>(pool->size())) : 1;
+  if (parts < 2) {
+    part(0, rows);
+    return;
+  }
+  pool->run(static_cast<size_t>(parts), [&](size_t i, unsigned) {
+    part(static_cast<int>(rows * static_cast<int64_t>(i) / parts),
+         static_cast<int>(rows * static_cast<int64_t>(i + 1) / parts));
+  });
+}
+
 }  // namespace
 
 void DisparityPyramid::build(const cv::Mat& disparity, const StereoCameraModel& camera, PyramidType type,
-                             int top_level) {
+                             int top_level, WorkerPool* pool) {
   CV_Assert(disparity.type() == CV_32FC1);
   type_ = type;
   const float invalid = invalidValue();
@@ -95,11 +114,13 @@ void DisparityPyramid::build(const cv::Mat& disparity, const StereoCameraModel& 
   cv::Mat& d0 = levels_[0];
   d0.create(disparity.rows, disparity.cols, CV_32FC1);
   if (top_level == 0) {  // level 0 alone: sanitise. Branch-free, so that it vectorises.
-    for (int y = 0; y < disparity.rows; ++y) {
-      const float* in = disparity.ptr<float>(y);
-      float* out = d0.ptr<float>(y);
-      for (int x = 0; x < disparity.cols; ++x) out[x] = valid(in[x]) ? in[x] : invalid;
-    }
+    inRowBands(disparity.rows, pool, [&](int y_begin, int y_end) {
+      for (int y = y_begin; y < y_end; ++y) {
+        const float* in = disparity.ptr<float>(y);
+        float* out = d0.ptr<float>(y);
+        for (int x = 0; x < disparity.cols; ++x) out[x] = valid(in[x]) ? in[x] : invalid;
+      }
+    });
     return;
   }
   levels_[1].create((disparity.rows + 1) / 2, (disparity.cols + 1) / 2, CV_32FC1);
@@ -107,7 +128,11 @@ void DisparityPyramid::build(const cv::Mat& disparity, const StereoCameraModel& 
   auto build = [&](auto reduction) {
     using Reduction = decltype(reduction);
     auto op = [](float a, float b) { return Reduction::op(a, b); };
-    sanitiseAndReduce<Reduction>(disparity, valid, invalid, &d0, &levels_[1]);
+    // The pass over the whole image in bands of rows; the levels above it
+    // hold a third of level 1's pixels, too few to share.
+    inRowBands(levels_[1].rows, pool, [&](int y_begin, int y_end) {
+      sanitiseAndReduce<Reduction>(disparity, valid, invalid, y_begin, y_end, &d0, &levels_[1]);
+    });
     // Levels 2.. from 1: 2x2 blocks; an odd last row or column pairs with itself.
     for (int i = 2; i <= top_level; ++i) {
       const cv::Mat& src = levels_[i - 1];

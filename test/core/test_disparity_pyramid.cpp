@@ -52,6 +52,34 @@ void expectReductionExact(const DisparityPyramid& pyr, bool is_min) {
 
 }  // namespace
 
+// On a pool's workers (the pass over the image in bands of rows) the same
+// pyramid, bit for bit, for sizes with odd rows and bands of unequal height.
+TEST(DisparityPyramid, WorkersBuildTheSamePyramid) {
+  const StereoCameraModel cam{StereoCameraConfig()};
+  for (auto size : {cv::Size(640, 480), cv::Size(641, 479), cv::Size(37, 97), cv::Size(9, 31)}) {
+    const cv::Mat img = randomDisparity(size.width, size.height, 5);
+    for (PyramidType type : {PyramidType::kMinDisparity, PyramidType::kMaxDisparity})
+      for (int top : {0, 1, 5}) {
+        DisparityPyramid alone;
+        alone.build(img, cam, type, top);
+        for (unsigned threads : {2u, 3u, 5u}) {
+          WorkerPool pool(threads);
+          DisparityPyramid shared;
+          shared.build(img, cam, type, top, &pool);
+          ASSERT_EQ(shared.topLevel(), alone.topLevel());
+          for (int i = 0; i <= alone.topLevel(); ++i) {
+            const cv::Mat& a = alone.level(i);
+            const cv::Mat& b = shared.level(i);
+            ASSERT_EQ(a.size(), b.size());
+            for (int y = 0; y < a.rows; ++y)
+              ASSERT_EQ(std::memcmp(a.ptr<float>(y), b.ptr<float>(y), a.cols * sizeof(float)), 0)
+                  << size << " top " << top << " threads " << threads << " level " << i << " row " << y;
+          }
+        }
+      }
+  }
+}
+
 TEST(DisparityPyramid, Level0IsSanitised) {
   const StereoCameraModel cam{StereoCameraConfig()};  // near disparity 420 px
   // Sizes that end in the vectorised part of a row and in its scalar rest,
