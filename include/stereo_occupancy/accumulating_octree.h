@@ -14,6 +14,18 @@
 
 namespace stereo_occupancy {
 
+/// True if the leaf at @p it overlaps the keys [lo, hi] on every axis.
+/// octomap 1.9's leaf_bbx_iterator also hands out a coarse leaf that ends
+/// just before the box: loops over a box's leaves skip those.
+inline bool leafOverlaps(const octomap::OcTree::leaf_bbx_iterator& it, unsigned tree_depth,
+                         const octomap::OcTreeKey& lo, const octomap::OcTreeKey& hi) {
+  const octomap::OcTreeKey first = it.getIndexKey();
+  const int side = 1 << (tree_depth - it.getDepth());
+  for (int a = 0; a < 3; ++a)
+    if (first[a] + side - 1 < lo[a] || first[a] > hi[a]) return false;
+  return true;
+}
+
 /// An OcTree with two additions the accumulator needs: adding log-odds to
 /// many leaves in a row without descending from the root for each, and
 /// rebuilding a tree leaf by leaf.

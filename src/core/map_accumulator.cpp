@@ -382,14 +382,6 @@ void tileKeys(const MapAccumulator::TileIndex& tile, int offset, octomap::OcTree
     (*hi)[a] = static_cast<octomap::key_type>((*lo)[a] + MapAccumulator::kTileCells - 1);
   }
 }
-/// True if @p key lies in [lo, hi] on every axis. octomap 1.9's
-/// leaf_bbx_iterator also hands out a coarse leaf (merged equal leaves)
-/// that ends just before the box: a tile's leaves are filtered by it.
-bool keyInside(const octomap::OcTreeKey& key, const octomap::OcTreeKey& lo, const octomap::OcTreeKey& hi) {
-  for (int a = 0; a < 3; ++a)
-    if (key[a] < lo[a] || key[a] > hi[a]) return false;
-  return true;
-}
 /// The key range holds 2^kTileDepth tiles per axis, centred on 0.
 bool tileInKeyRange(const MapAccumulator::TileIndex& tile) {
   constexpr int kHalf = (1 << MapAccumulator::kTileDepth) / 2;
@@ -444,7 +436,7 @@ std::vector<MapAccumulator::Leaf> MapAccumulator::tileLeaves(const TileIndex& ti
   octomap::OcTreeKey lo, hi;
   tileKeys(tile, static_cast<int>(tree_->coordToKey(0.0)), &lo, &hi);
   for (auto it = tree_->begin_leafs_bbx(lo, hi), end = tree_->end_leafs_bbx(); it != end; ++it) {
-    if (it.getDepth() >= kTileDepth && !keyInside(it.getKey(), lo, hi)) continue;  // see keyInside
+    if (!leafOverlaps(it, tree_->getTreeDepth(), lo, hi)) continue;
     Leaf leaf;
     // A leaf coarser than the tile gives the tile's part of it.
     leaf.key = it.getDepth() < kTileDepth ? lo : it.getKey();
@@ -470,7 +462,7 @@ size_t MapAccumulator::dropTile(const TileIndex& tile) {
   tileKeys(tile, static_cast<int>(tree_->coordToKey(0.0)), &lo, &hi);
   size_t leaves = 0;
   for (auto it = tree_->begin_leafs_bbx(lo, hi), end = tree_->end_leafs_bbx(); it != end; ++it) {
-    if (it.getDepth() >= kTileDepth && !keyInside(it.getKey(), lo, hi)) continue;
+    if (!leafOverlaps(it, tree_->getTreeDepth(), lo, hi)) continue;
     ++leaves;
     if (!all_changed_) insertBlocksOf(it.getKey(), it.getDepth(), &changed_blocks_);
   }

@@ -13,6 +13,7 @@
 #include <streambuf>
 #include <utility>
 
+#include "stereo_occupancy/accumulating_octree.h"
 #include "stereo_occupancy/map_accumulator.h"
 
 namespace stereo_occupancy {
@@ -279,17 +280,6 @@ std::pair<octomap::OcTreeKey, octomap::OcTreeKey> blockKeys(const octomap::OcTre
   };
   const Eigen::Vector3i lo = b * kBlock;
   return {key(lo), key(lo + Eigen::Vector3i::Constant(kBlock - 1))};
-}
-
-/// True if the leaf at @p it overlaps the keys [lo, hi]: octomap 1.9's
-/// leaf_bbx_iterator also hands out a coarse leaf that ends just before the box.
-bool leafOverlaps(const octomap::OcTree::leaf_bbx_iterator& it, unsigned tree_depth, const octomap::OcTreeKey& lo,
-                  const octomap::OcTreeKey& hi) {
-  const octomap::OcTreeKey first = it.getIndexKey();
-  const int side = 1 << (tree_depth - it.getDepth());
-  for (int a = 0; a < 3; ++a)
-    if (first[a] + side - 1 < lo[a] || first[a] > hi[a]) return false;
-  return true;
 }
 
 /// Empties @p markers; for the whole map (@p all) a DELETEALL first.
