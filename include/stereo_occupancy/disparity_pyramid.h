@@ -42,6 +42,12 @@ class DisparityPyramid {
   /// same pyramid).
   void build(const cv::Mat& disparity, const StereoCameraModel& camera, PyramidType type, int top_level,
              WorkerPool* pool = nullptr);
+  /// The min pyramid into @p min_pyramid and the max pyramid into @p
+  /// max_pyramid (either may be null) of the same image, as build() builds
+  /// them, in one pass over the image: each pair of its rows is read once
+  /// for both (the bounded algorithms draw from both).
+  static void buildPyramids(const cv::Mat& disparity, const StereoCameraModel& camera, int top_level,
+                            DisparityPyramid* min_pyramid, DisparityPyramid* max_pyramid, WorkerPool* pool = nullptr);
 
   PyramidType type() const { return type_; }
   int topLevel() const { return static_cast<int>(levels_.size()) - 1; }

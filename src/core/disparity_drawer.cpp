@@ -165,8 +165,8 @@ DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::
       break;
     case DrawingAlgorithm::kLinePyramidBounded:
     case DrawingAlgorithm::kRayTracePyramidBounded:
-      min_pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel(), workers_.get());
-      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel(), workers_.get());
+      DisparityPyramid::buildPyramids(disparity, camera_, levels_.topLevel(), &min_pyramid_, &max_pyramid_,
+                                      workers_.get());
       if (config_.algorithm == DrawingAlgorithm::kLinePyramidBounded)
         line_drawer_.drawPyramidBounded(min_pyramid_, max_pyramid_, *bound_, T_W_C, grid, &stats);
       else

@@ -27,56 +27,92 @@ struct MaxDisparity {  // eq. 16
 #endif
 };
 
-/// Level 0 (the sanitised input) and level 1 in one pass over the input:
-/// each pair of input rows is sanitised into level 0 and reduced into a row
-/// of level 1 while it is in registers, with Reduction::op, four lanes at a
-/// time with Reduction::op4, for the rows [y_begin, y_end) of level 1. NaN,
-/// negative and out-of-range values carry no information.
+/// One pyramid's first two levels as they are built: level 0 (the
+/// sanitised input), level 1, and the value of a pixel without information.
+struct FirstLevels {
+  cv::Mat* d0;
+  cv::Mat* d1;
+  float invalid;
+};
+
+/// Row y of level 1 and rows 2y, 2y + 1 of level 0 from the input rows
+/// @p in0 and @p in1 (the same row for an odd last one): each pair of input
+/// rows is sanitised into level 0 and reduced into a row of level 1 while
+/// it is in registers, with Reduction::op, four lanes at a time with
+/// Reduction::op4. NaN, negative and out-of-range values carry no information.
 template <typename Reduction>
-void sanitiseAndReduce(const cv::Mat& disparity, StereoCameraModel::DisparityValidity valid, float invalid,
-                       int y_begin, int y_end, cv::Mat* d0, cv::Mat* d1) {
-  const int cols = disparity.cols, rows = disparity.rows;
+void sanitiseAndReduceRow(const float* in0, const float* in1, int cols, StereoCameraModel::DisparityValidity valid,
+                          const FirstLevels& out_levels, int y) {
   const int w = (cols + 1) / 2;
   const int full = cols / 2;  // blocks with two columns
+  const bool two_rows = in1 != in0;
+  const float invalid = out_levels.invalid;
   auto sanitise = [&](float d) { return valid(d) ? d : invalid; };
+  float* s0 = out_levels.d0->ptr<float>(2 * y);
+  float* s1 = two_rows ? out_levels.d0->ptr<float>(2 * y + 1) : s0;
+  float* out = out_levels.d1->ptr<float>(y);
+  int x = 0;
 #if defined(__SSE2__)
   const __m128 zero = _mm_setzero_ps(), lo = _mm_set1_ps(valid.min_px), hi = _mm_set1_ps(valid.max_px);
   const __m128 inv = _mm_set1_ps(invalid);
-  auto sanitise4 = [&](const float* in, float* out) {  // the same as sanitise(), four at a time
+  auto sanitise4 = [&](const float* in, float* s) {  // the same as sanitise(), four at a time
     const __m128 d = _mm_loadu_ps(in);
     const __m128 ok = _mm_or_ps(_mm_cmpeq_ps(d, zero), _mm_and_ps(_mm_cmpge_ps(d, lo), _mm_cmple_ps(d, hi)));
     const __m128 v = _mm_or_ps(_mm_and_ps(ok, d), _mm_andnot_ps(ok, inv));
-    _mm_storeu_ps(out, v);
+    _mm_storeu_ps(s, v);
     return v;
   };
+  for (; 2 * x + 8 <= cols; x += 4) {  // four blocks: eight columns of both rows
+    const __m128 a0 = sanitise4(in0 + 2 * x, s0 + 2 * x), a1 = sanitise4(in0 + 2 * x + 4, s0 + 2 * x + 4);
+    const __m128 b0 = sanitise4(in1 + 2 * x, s1 + 2 * x), b1 = sanitise4(in1 + 2 * x + 4, s1 + 2 * x + 4);
+    const __m128 top = Reduction::op4(_mm_shuffle_ps(a0, a1, _MM_SHUFFLE(2, 0, 2, 0)),
+                                      _mm_shuffle_ps(a0, a1, _MM_SHUFFLE(3, 1, 3, 1)));
+    const __m128 bottom = Reduction::op4(_mm_shuffle_ps(b0, b1, _MM_SHUFFLE(2, 0, 2, 0)),
+                                         _mm_shuffle_ps(b0, b1, _MM_SHUFFLE(3, 1, 3, 1)));
+    _mm_storeu_ps(out + x, Reduction::op4(top, bottom));
+  }
 #endif
+  for (; x < full; ++x) {
+    const float a = s0[2 * x] = sanitise(in0[2 * x]), b = s0[2 * x + 1] = sanitise(in0[2 * x + 1]);
+    const float c = s1[2 * x] = sanitise(in1[2 * x]), d = s1[2 * x + 1] = sanitise(in1[2 * x + 1]);
+    out[x] = Reduction::op(Reduction::op(a, b), Reduction::op(c, d));
+  }
+  if (full < w) {
+    const float a = s0[2 * full] = sanitise(in0[2 * full]), c = s1[2 * full] = sanitise(in1[2 * full]);
+    out[full] = Reduction::op(a, c);
+  }
+}
+
+/// The rows [y_begin, y_end) of level 1 (and their rows of level 0) of the
+/// min pyramid, when @p min_levels is set, and of the max pyramid, when
+/// @p max_levels is: both from the same input rows while they are in the cache.
+void sanitiseAndReduce(const cv::Mat& disparity, StereoCameraModel::DisparityValidity valid, int y_begin, int y_end,
+                       const FirstLevels* min_levels, const FirstLevels* max_levels) {
   for (int y = y_begin; y < y_end; ++y) {  // rows of level 1
-    const bool two_rows = 2 * y + 1 < rows;  // an odd last row pairs with itself
     const float* in0 = disparity.ptr<float>(2 * y);
-    const float* in1 = two_rows ? disparity.ptr<float>(2 * y + 1) : in0;
-    float* s0 = d0->ptr<float>(2 * y);
-    float* s1 = two_rows ? d0->ptr<float>(2 * y + 1) : s0;
-    float* out = d1->ptr<float>(y);
-    int x = 0;
-#if defined(__SSE2__)
-    for (; 2 * x + 8 <= cols; x += 4) {  // four blocks: eight columns of both rows
-      const __m128 a0 = sanitise4(in0 + 2 * x, s0 + 2 * x), a1 = sanitise4(in0 + 2 * x + 4, s0 + 2 * x + 4);
-      const __m128 b0 = sanitise4(in1 + 2 * x, s1 + 2 * x), b1 = sanitise4(in1 + 2 * x + 4, s1 + 2 * x + 4);
-      const __m128 top = Reduction::op4(_mm_shuffle_ps(a0, a1, _MM_SHUFFLE(2, 0, 2, 0)),
-                                        _mm_shuffle_ps(a0, a1, _MM_SHUFFLE(3, 1, 3, 1)));
-      const __m128 bottom = Reduction::op4(_mm_shuffle_ps(b0, b1, _MM_SHUFFLE(2, 0, 2, 0)),
-                                           _mm_shuffle_ps(b0, b1, _MM_SHUFFLE(3, 1, 3, 1)));
-      _mm_storeu_ps(out + x, Reduction::op4(top, bottom));
-    }
-#endif
-    for (; x < full; ++x) {
-      const float a = s0[2 * x] = sanitise(in0[2 * x]), b = s0[2 * x + 1] = sanitise(in0[2 * x + 1]);
-      const float c = s1[2 * x] = sanitise(in1[2 * x]), d = s1[2 * x + 1] = sanitise(in1[2 * x + 1]);
-      out[x] = Reduction::op(Reduction::op(a, b), Reduction::op(c, d));
-    }
-    if (full < w) {
-      const float a = s0[2 * full] = sanitise(in0[2 * full]), c = s1[2 * full] = sanitise(in1[2 * full]);
-      out[full] = Reduction::op(a, c);
+    const float* in1 = 2 * y + 1 < disparity.rows ? disparity.ptr<float>(2 * y + 1) : in0;  // an odd last row
+    if (min_levels) sanitiseAndReduceRow<MinDisparity>(in0, in1, disparity.cols, valid, *min_levels, y);
+    if (max_levels) sanitiseAndReduceRow<MaxDisparity>(in0, in1, disparity.cols, valid, *max_levels, y);
+  }
+}
+
+/// Levels 2 .. top of @p levels from level 1: 2x2 blocks; an odd last row or column pairs with itself.
+template <typename Reduction>
+void reduceUpperLevels(std::vector<cv::Mat>* levels) {
+  auto op = [](float a, float b) { return Reduction::op(a, b); };
+  for (size_t i = 2; i < levels->size(); ++i) {
+    const cv::Mat& src = (*levels)[i - 1];
+    cv::Mat& dst = (*levels)[i];
+    const int w = (src.cols + 1) / 2;
+    const int h = (src.rows + 1) / 2;
+    const int full = src.cols / 2;  // blocks with two columns
+    dst.create(h, w, CV_32FC1);
+    for (int y = 0; y < h; ++y) {
+      const float* r0 = src.ptr<float>(2 * y);
+      const float* r1 = 2 * y + 1 < src.rows ? src.ptr<float>(2 * y + 1) : r0;
+      float* out = dst.ptr<float>(y);
+      for (int x = 0; x < full; ++x) out[x] = op(op(r0[2 * x], r0[2 * x + 1]), op(r1[2 * x], r1[2 * x + 1]));
+      if (full < w) out[full] = op(r0[2 * full], r1[2 * full]);
     }
   }
 }
@@ -104,57 +140,49 @@ void inRowBands(int rows, WorkerPool* pool, const Part& part) {
 
 void DisparityPyramid::build(const cv::Mat& disparity, const StereoCameraModel& camera, PyramidType type,
                              int top_level, WorkerPool* pool) {
-  CV_Assert(disparity.type() == CV_32FC1);
-  type_ = type;
-  const float invalid = invalidValue();
-  top_level = std::max(top_level, 0);
-  levels_.resize(top_level + 1);
-  const StereoCameraModel::DisparityValidity valid = camera.validity();
+  if (type == PyramidType::kMinDisparity)
+    buildPyramids(disparity, camera, top_level, this, nullptr, pool);
+  else
+    buildPyramids(disparity, camera, top_level, nullptr, this, pool);
+}
 
-  cv::Mat& d0 = levels_[0];
-  d0.create(disparity.rows, disparity.cols, CV_32FC1);
+void DisparityPyramid::buildPyramids(const cv::Mat& disparity, const StereoCameraModel& camera, int top_level,
+                                     DisparityPyramid* min_pyramid, DisparityPyramid* max_pyramid, WorkerPool* pool) {
+  CV_Assert(disparity.type() == CV_32FC1 && (min_pyramid || max_pyramid) && min_pyramid != max_pyramid);
+  top_level = std::max(top_level, 0);
+  const StereoCameraModel::DisparityValidity valid = camera.validity();
+  FirstLevels first[2] = {};  // d0 null: that pyramid is not built
+  DisparityPyramid* pyramids[2] = {min_pyramid, max_pyramid};
+  for (int k = 0; k < 2; ++k) {
+    DisparityPyramid* p = pyramids[k];
+    if (!p) continue;
+    p->type_ = k == 0 ? PyramidType::kMinDisparity : PyramidType::kMaxDisparity;
+    p->levels_.resize(top_level + 1);
+    p->levels_[0].create(disparity.rows, disparity.cols, CV_32FC1);
+    if (top_level > 0) p->levels_[1].create((disparity.rows + 1) / 2, (disparity.cols + 1) / 2, CV_32FC1);
+    first[k] = {&p->levels_[0], top_level > 0 ? &p->levels_[1] : nullptr, p->invalidValue()};
+  }
   if (top_level == 0) {  // level 0 alone: sanitise. Branch-free, so that it vectorises.
     inRowBands(disparity.rows, pool, [&](int y_begin, int y_end) {
       for (int y = y_begin; y < y_end; ++y) {
         const float* in = disparity.ptr<float>(y);
-        float* out = d0.ptr<float>(y);
-        for (int x = 0; x < disparity.cols; ++x) out[x] = valid(in[x]) ? in[x] : invalid;
+        for (const FirstLevels& f : first) {
+          if (!f.d0) continue;
+          float* out = f.d0->ptr<float>(y);
+          for (int x = 0; x < disparity.cols; ++x) out[x] = valid(in[x]) ? in[x] : f.invalid;
+        }
       }
     });
     return;
   }
-  levels_[1].create((disparity.rows + 1) / 2, (disparity.cols + 1) / 2, CV_32FC1);
-
-  auto build = [&](auto reduction) {
-    using Reduction = decltype(reduction);
-    auto op = [](float a, float b) { return Reduction::op(a, b); };
-    // The pass over the whole image in bands of rows; the levels above it
-    // hold a third of level 1's pixels, too few to share.
-    inRowBands(levels_[1].rows, pool, [&](int y_begin, int y_end) {
-      sanitiseAndReduce<Reduction>(disparity, valid, invalid, y_begin, y_end, &d0, &levels_[1]);
-    });
-    // Levels 2.. from 1: 2x2 blocks; an odd last row or column pairs with itself.
-    for (int i = 2; i <= top_level; ++i) {
-      const cv::Mat& src = levels_[i - 1];
-      cv::Mat& dst = levels_[i];
-      const int w = (src.cols + 1) / 2;
-      const int h = (src.rows + 1) / 2;
-      const int full = src.cols / 2;  // blocks with two columns
-      dst.create(h, w, CV_32FC1);
-      for (int y = 0; y < h; ++y) {
-        const float* r0 = src.ptr<float>(2 * y);
-        const float* r1 = 2 * y + 1 < src.rows ? src.ptr<float>(2 * y + 1) : r0;
-        float* out = dst.ptr<float>(y);
-        for (int x = 0; x < full; ++x) out[x] = op(op(r0[2 * x], r0[2 * x + 1]), op(r1[2 * x], r1[2 * x + 1]));
-        if (full < w) out[full] = op(r0[2 * full], r1[2 * full]);
-      }
-    }
-  };
-  if (type == PyramidType::kMinDisparity) {
-    build(MinDisparity());
-  } else {
-    build(MaxDisparity());
-  }
+  // The pass over the whole image in bands of rows; the levels above it
+  // hold a third of level 1's pixels, too few to share.
+  inRowBands((disparity.rows + 1) / 2, pool, [&](int y_begin, int y_end) {
+    sanitiseAndReduce(disparity, valid, y_begin, y_end, min_pyramid ? &first[0] : nullptr,
+                      max_pyramid ? &first[1] : nullptr);
+  });
+  if (min_pyramid) reduceUpperLevels<MinDisparity>(&min_pyramid->levels_);
+  if (max_pyramid) reduceUpperLevels<MaxDisparity>(&max_pyramid->levels_);
 }
 
 PyramidLevelTable::PyramidLevelTable(const StereoCameraModel& camera, double cell_size_m)

@@ -80,6 +80,38 @@ TEST(DisparityPyramid, WorkersBuildTheSamePyramid) {
   }
 }
 
+// Both pyramids of one image in one pass: the same levels, bit for bit, as
+// two builds, alone and on a pool's workers.
+TEST(DisparityPyramid, BothPyramidsInOnePassAreTheTwoBuilds) {
+  const StereoCameraModel cam{StereoCameraConfig()};
+  for (auto size : {cv::Size(640, 480), cv::Size(641, 479), cv::Size(37, 97), cv::Size(9, 31)}) {
+    const cv::Mat img = randomDisparity(size.width, size.height, 7);
+    for (int top : {0, 1, 5}) {
+      DisparityPyramid min_alone, max_alone;
+      min_alone.build(img, cam, PyramidType::kMinDisparity, top);
+      max_alone.build(img, cam, PyramidType::kMaxDisparity, top);
+      for (unsigned threads : {1u, 2u, 3u}) {
+        WorkerPool pool(threads);
+        DisparityPyramid min_both, max_both;
+        DisparityPyramid::buildPyramids(img, cam, top, &min_both, &max_both, threads > 1 ? &pool : nullptr);
+        ASSERT_EQ(min_both.type(), PyramidType::kMinDisparity);
+        ASSERT_EQ(max_both.type(), PyramidType::kMaxDisparity);
+        for (auto pair : {std::make_pair(&min_alone, &min_both), std::make_pair(&max_alone, &max_both)}) {
+          ASSERT_EQ(pair.second->topLevel(), pair.first->topLevel());
+          for (int i = 0; i <= pair.first->topLevel(); ++i) {
+            const cv::Mat& a = pair.first->level(i);
+            const cv::Mat& b = pair.second->level(i);
+            ASSERT_EQ(a.size(), b.size());
+            for (int y = 0; y < a.rows; ++y)
+              ASSERT_EQ(std::memcmp(a.ptr<float>(y), b.ptr<float>(y), a.cols * sizeof(float)), 0)
+                  << size << " top " << top << " threads " << threads << " level " << i << " row " << y;
+          }
+        }
+      }
+    }
+  }
+}
+
 TEST(DisparityPyramid, Level0IsSanitised) {
   const StereoCameraModel cam{StereoCameraConfig()};  // near disparity 420 px
   // Sizes that end in the vectorised part of a row and in its scalar rest,
