@@ -21,23 +21,26 @@
 
 namespace stereo_occupancy {
 
-/// Instruction sets the line drawing's free run uses, in rising order.
+/// Instruction sets the line drawing's free run uses.
 enum class SimdLevel {
-  kScalar,  ///< plain C++ (every target; the only one off x86-64)
+  kScalar,  ///< plain C++ (every target)
   kSse2,    ///< two cells at a time (every x86-64 CPU)
+  kNeon,    ///< two cells at a time (every aarch64 CPU)
 };
-/// The level's name: "scalar" or "sse2".
+/// The level's name: "scalar", "sse2" or "neon".
 const char* toString(SimdLevel level);
 
 /// The best level this target offers (the default of DrawingConfig::simd).
 SimdLevel availableSimdLevel();
+/// True for kScalar and for availableSimdLevel().
+bool isAvailable(SimdLevel level);
 
 /// Draws disparity images into a LocalGrid by line drawing. Holds references
 /// to the camera, the lookup tables and the grid; not thread-safe (but it
 /// may draw one image on several threads: setWorkers()).
 class LineDrawer {
  public:
-  /// @param simd the free run's instruction set; above availableSimdLevel() the best available is used.
+  /// @param simd the free run's instruction set; one this target lacks (isAvailable()) gives availableSimdLevel().
   LineDrawer(const StereoCameraModel& camera, const LogOddsTable& table, const PyramidLevelTable& levels,
              SimdLevel simd = availableSimdLevel());
 

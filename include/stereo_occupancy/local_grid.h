@@ -11,6 +11,9 @@
 #include <vector>
 #if defined(__SSE2__)
 #include <emmintrin.h>
+#elif defined(__aarch64__) && defined(__ARM_NEON)
+#define STEREO_OCCUPANCY_NEON_BLOCKS 1
+#include <arm_neon.h>
 #endif
 
 #include "stereo_occupancy/stereo_camera_model.h"
@@ -109,7 +112,7 @@ constexpr int kInformationBlock = 16;
 
 /// True if one of the kInformationBlock cells from @p cells holds
 /// information: known (not LocalGrid::kUnknown) and not 0. Skips the empty
-/// stretches of a frustum's box 16 cells at a time (SSE2 where available).
+/// stretches of a frustum's box 16 cells at a time (SSE2 or NEON where available).
 inline bool blockHasInformation(const float* cells) {
 #if defined(__SSE2__)
   const __m128 unknown = _mm_set1_ps(LocalGrid::kUnknown), zero = _mm_setzero_ps();
@@ -119,6 +122,14 @@ inline bool blockHasInformation(const float* cells) {
     hit = _mm_or_ps(hit, _mm_and_ps(_mm_cmpneq_ps(v, unknown), _mm_cmpneq_ps(v, zero)));
   }
   return _mm_movemask_ps(hit) != 0;
+#elif STEREO_OCCUPANCY_NEON_BLOCKS
+  const float32x4_t unknown = vdupq_n_f32(LocalGrid::kUnknown), zero = vdupq_n_f32(0.0f);
+  uint32x4_t hit = vdupq_n_u32(0);
+  for (int j = 0; j < kInformationBlock; j += 4) {  // neither unknown nor 0 (NaN included, as cmpneq)
+    const float32x4_t v = vld1q_f32(cells + j);
+    hit = vorrq_u32(hit, vmvnq_u32(vorrq_u32(vceqq_f32(v, unknown), vceqq_f32(v, zero))));
+  }
+  return vmaxvq_u32(hit) != 0;
 #else
   bool hit = false;
   for (int j = 0; j < kInformationBlock; ++j) hit |= cells[j] != LocalGrid::kUnknown && cells[j] != 0.0f;
@@ -128,13 +139,19 @@ inline bool blockHasInformation(const float* cells) {
 
 /// True if one of the kInformationBlock cells from @p cells is known (not
 /// LocalGrid::kUnknown): lets a merge of mostly untouched grids skip them
-/// 16 cells at a time (SSE2 where available).
+/// 16 cells at a time (SSE2 or NEON where available).
 inline bool blockHasKnown(const float* cells) {
 #if defined(__SSE2__)
   const __m128 unknown = _mm_set1_ps(LocalGrid::kUnknown);
   __m128 hit = _mm_setzero_ps();
   for (int j = 0; j < kInformationBlock; j += 4) hit = _mm_or_ps(hit, _mm_cmpneq_ps(_mm_loadu_ps(cells + j), unknown));
   return _mm_movemask_ps(hit) != 0;
+#elif STEREO_OCCUPANCY_NEON_BLOCKS
+  const float32x4_t unknown = vdupq_n_f32(LocalGrid::kUnknown);
+  uint32x4_t hit = vdupq_n_u32(0);
+  for (int j = 0; j < kInformationBlock; j += 4)
+    hit = vorrq_u32(hit, vmvnq_u32(vceqq_f32(vld1q_f32(cells + j), unknown)));
+  return vmaxvq_u32(hit) != 0;
 #else
   bool hit = false;
   for (int j = 0; j < kInformationBlock; ++j) hit |= cells[j] != LocalGrid::kUnknown;
@@ -144,13 +161,18 @@ inline bool blockHasKnown(const float* cells) {
 
 /// True if one of the kInformationBlock cells from @p cells is occupied
 /// (log-odds > 0): lets silenceNearOccupied() skip a frame's grid 16 cells
-/// at a time (SSE2 where available).
+/// at a time (SSE2 or NEON where available).
 inline bool blockHasOccupied(const float* cells) {
 #if defined(__SSE2__)
   const __m128 zero = _mm_setzero_ps();
   __m128 hit = zero;
   for (int j = 0; j < kInformationBlock; j += 4) hit = _mm_or_ps(hit, _mm_cmpgt_ps(_mm_loadu_ps(cells + j), zero));
   return _mm_movemask_ps(hit) != 0;
+#elif STEREO_OCCUPANCY_NEON_BLOCKS
+  const float32x4_t zero = vdupq_n_f32(0.0f);
+  uint32x4_t hit = vdupq_n_u32(0);
+  for (int j = 0; j < kInformationBlock; j += 4) hit = vorrq_u32(hit, vcgtq_f32(vld1q_f32(cells + j), zero));
+  return vmaxvq_u32(hit) != 0;
 #else
   bool hit = false;
   for (int j = 0; j < kInformationBlock; ++j) hit |= cells[j] > 0.0f;

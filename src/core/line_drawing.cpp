@@ -6,6 +6,9 @@
 #if defined(__SSE2__) && defined(__x86_64__)
 #define STEREO_OCCUPANCY_X86_64_SIMD 1
 #include <emmintrin.h>
+#elif defined(__aarch64__) && defined(__ARM_NEON)
+#define STEREO_OCCUPANCY_AARCH64_SIMD 1
+#include <arm_neon.h>
 #endif
 
 #include "stereo_occupancy/integer_math.h"
@@ -100,15 +103,54 @@ int freeRunSse2(float* data, int k, int k_end, float free_value, LineCursor* r) 
 }
 #endif
 
+#if STEREO_OCCUPANCY_AARCH64_SIMD
+/// freeRunSse2() in NEON's 64-bit lanes: the same 32.32 fixed-point sums;
+/// one unzip gathers the four cell coordinates (the lanes' high halves),
+/// two widening multiply-adds by the strides give both cells' indices, then
+/// a max-store per cell. The same preconditions (positions >= 0, strides
+/// within 32 bits) and the same cells.
+int freeRunNeon(float* data, int k, int k_end, float free_value, LineCursor* r) {
+  if (k + 1 >= k_end) return k;
+  const int64x2_t two_dta = vdupq_n_s64(2 * r->step_a), two_dtb = vdupq_n_s64(2 * r->step_b);
+  const int64x2_t two_didx_m = vdupq_n_s64(2 * r->step_index_major);
+  const uint32x2_t vsa = vdup_n_u32(static_cast<uint32_t>(r->stride_a));
+  const uint32x4_t vsb = vdupq_n_u32(static_cast<uint32_t>(r->stride_b));
+  const int64_t a[2] = {r->pos_a, r->pos_a + r->step_a}, b[2] = {r->pos_b, r->pos_b + r->step_b};
+  const int64_t m[2] = {r->index_major, r->index_major + r->step_index_major};
+  int64x2_t va = vld1q_s64(a), vb = vld1q_s64(b), vm = vld1q_s64(m);  // lane 0: cell k, lane 1: cell k + 1
+  for (; k + 1 < k_end; k += 2) {
+    // {a_k, a_k+1, b_k, b_k+1}: the high halves of the positions.
+    const uint32x4_t cells = vuzp2q_u32(vreinterpretq_u32_s64(va), vreinterpretq_u32_s64(vb));
+    const uint64x2_t idx =
+        vmlal_high_u32(vmlal_u32(vreinterpretq_u64_s64(vm), vget_low_u32(cells), vsa), cells, vsb);
+    float* c0 = data + static_cast<int64_t>(vgetq_lane_u64(idx, 0));
+    float* c1 = data + static_cast<int64_t>(vgetq_lane_u64(idx, 1));
+    *c0 = std::max(*c0, free_value);  // obstacle priority (section V-A, step 2b)
+    *c1 = std::max(*c1, free_value);
+    va = vaddq_s64(va, two_dta);
+    vb = vaddq_s64(vb, two_dtb);
+    vm = vaddq_s64(vm, two_didx_m);
+  }
+  r->pos_a = vgetq_lane_s64(va, 0);
+  r->pos_b = vgetq_lane_s64(vb, 0);
+  r->index_major = vgetq_lane_s64(vm, 0);
+  return k;
+}
+#endif
+
 }  // namespace
 
 SimdLevel availableSimdLevel() {
 #if STEREO_OCCUPANCY_X86_64_SIMD
   return SimdLevel::kSse2;
+#elif STEREO_OCCUPANCY_AARCH64_SIMD
+  return SimdLevel::kNeon;
 #else
   return SimdLevel::kScalar;
 #endif
 }
+
+bool isAvailable(SimdLevel level) { return level == SimdLevel::kScalar || level == availableSimdLevel(); }
 
 const char* toString(SimdLevel level) {
   switch (level) {
@@ -116,13 +158,15 @@ const char* toString(SimdLevel level) {
       return "scalar";
     case SimdLevel::kSse2:
       return "sse2";
+    case SimdLevel::kNeon:
+      return "neon";
   }
   return "?";
 }
 
 LineDrawer::LineDrawer(const StereoCameraModel& camera, const LogOddsTable& table, const PyramidLevelTable& levels,
                        SimdLevel simd)
-    : camera_(camera), table_(table), levels_(levels), simd_(std::min(simd, availableSimdLevel())) {}
+    : camera_(camera), table_(table), levels_(levels), simd_(isAvailable(simd) ? simd : availableSimdLevel()) {}
 
 LineDrawer::RayGrid LineDrawer::rayGrid(const Eigen::Vector3d& W_origin, LocalGrid* grid) const {
   RayGrid g;
@@ -239,11 +283,14 @@ STEREO_OCCUPANCY_INLINE uint64_t drawInnerCells(float* data, const InnerSlabs& i
   const float free_value = profile.free_log_odds;  // a local: stores to the grid cannot change it
   int k = 1;
   // The free run, most of the cells drawn, two cells at a time where it can.
+  const bool strides_fit = cursor->stride_a <= 0xffffffffLL && cursor->stride_b <= 0xffffffffLL;  // 32-bit lanes
 #if STEREO_OCCUPANCY_X86_64_SIMD
-  if (simd == SimdLevel::kSse2 && cursor->stride_a <= 0xffffffffLL && cursor->stride_b <= 0xffffffffLL)
-    k = freeRunSse2(data, k, k_free, free_value, cursor);
+  if (simd == SimdLevel::kSse2 && strides_fit) k = freeRunSse2(data, k, k_free, free_value, cursor);
+#elif STEREO_OCCUPANCY_AARCH64_SIMD
+  if (simd == SimdLevel::kNeon && strides_fit) k = freeRunNeon(data, k, k_free, free_value, cursor);
 #else
-  static_cast<void>(simd);  // one level off x86-64
+  static_cast<void>(simd);  // the scalar loop alone
+  static_cast<void>(strides_fit);
 #endif
   for (; k < k_free; ++k, cursor->advance()) drawCell(data, cursor->index(), free_value);
   if (k < inner.last) {  // the measurement's window reaches the inner slabs

@@ -442,14 +442,17 @@ TEST(Drawing, DifferentCellsCountedOnRequest) {
   }
 }
 
-// The free run's SSE2 kernel (x86-64) draws the same grids as the plain loop
-// that other targets run, bit for bit, for every line drawing algorithm,
+// The free run's SSE2 (x86-64) and NEON (aarch64) kernels draw the same
+// grids as the plain loop, bit for bit, for every line drawing algorithm,
 // from poses whose lines run along every axis in both directions.
 TEST(Drawing, SimdLevelsDrawTheSameGrids) {
   const StereoCameraConfig cam_cfg;
   const EquivalenceFrames frames = equivalenceFrames(cam_cfg);
   const SimdLevel best = availableSimdLevel();
   std::printf("[          ] free run: this target allows %s\n", toString(best));
+#if defined(__x86_64__) || defined(__aarch64__)
+  EXPECT_NE(best, SimdLevel::kScalar) << "both targets have a two-cell free run";
+#endif
   for (DrawingAlgorithm algorithm :
        {DrawingAlgorithm::kLine, DrawingAlgorithm::kLinePyramid, DrawingAlgorithm::kLinePyramidBounded}) {
     DrawingConfig scalar_config = config(algorithm);
@@ -460,8 +463,8 @@ TEST(Drawing, SimdLevelsDrawTheSameGrids) {
       LocalGrid plain;
       const DrawStatistics plain_stats = scalar.draw(image, frames.poses[p], &plain);
       EXPECT_GT(plain_stats.different_grid_cells, 20000u) << toString(algorithm) << " pose " << p;
-      for (SimdLevel level : {SimdLevel::kSse2}) {
-        if (level > best) continue;
+      for (SimdLevel level : {SimdLevel::kSse2, SimdLevel::kNeon}) {
+        if (!isAvailable(level)) continue;
         DrawingConfig simd_config = config(algorithm);
         simd_config.simd = level;
         DisparityDrawer drawer(cam_cfg, simd_config);

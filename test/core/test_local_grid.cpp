@@ -2,6 +2,8 @@
 
 #include <octomap/OcTree.h>
 
+#include <algorithm>
+#include <limits>
 #include <random>
 
 #include "stereo_occupancy/local_grid.h"
@@ -66,6 +68,34 @@ TEST(LocalGrid, ReleasesTheMemoryOfOneHugeGrid) {
   // Small grids keep their memory whatever the ratio (no allocation per image).
   grid.reset(Eigen::Vector3i::Zero(), Eigen::Vector3i(10, 10, 10), 0.25);
   EXPECT_GE(grid.capacityCells(), 600000u);
+}
+
+// The block tests (SSE2 on x86-64, NEON on aarch64, a plain loop elsewhere)
+// say what their definitions say, for one telling value at each of the 16
+// places in a block of unknown or of 0, and for blocks with none.
+TEST(LocalGrid, BlockTestsMatchTheirDefinitions) {
+  const float values[] = {LocalGrid::kUnknown, 0.0f, -0.0f, 0.4f, -0.4f, 1e-30f, -1e-30f,
+                          std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(),
+                          std::numeric_limits<float>::quiet_NaN()};
+  int checked = 0;
+  for (float background : {LocalGrid::kUnknown, 0.0f})
+    for (float value : values)
+      for (int j = 0; j < kInformationBlock; ++j) {
+        float cells[kInformationBlock];
+        std::fill(cells, cells + kInformationBlock, background);
+        cells[j] = value;
+        bool known = false, information = false, occupied = false;
+        for (float c : cells) {
+          known |= c != LocalGrid::kUnknown;
+          information |= c != LocalGrid::kUnknown && c != 0.0f;
+          occupied |= c > 0.0f;
+        }
+        EXPECT_EQ(blockHasKnown(cells), known) << background << " with " << value << " at " << j;
+        EXPECT_EQ(blockHasInformation(cells), information) << background << " with " << value << " at " << j;
+        EXPECT_EQ(blockHasOccupied(cells), occupied) << background << " with " << value << " at " << j;
+        checked += known + information + occupied;
+      }
+  EXPECT_GT(checked, 400);  // the blocks hold each answer, not only "no"
 }
 
 TEST(FrustumBoundingBox, ContainsTheFrustumAndIsTight) {
