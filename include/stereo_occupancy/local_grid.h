@@ -34,9 +34,11 @@ class LocalGrid {
  public:
   static constexpr float kUnknown = -std::numeric_limits<float>::infinity();
 
-  /// Re-shapes the grid and marks every cell unknown. Keeps its memory,
-  /// unless it is much more than the new size needs (releaseIfOversized).
-  void reset(const Eigen::Vector3i& origin_index, const Eigen::Vector3i& size, double resolution_m);
+  /// Re-shapes the grid and marks every cell unknown, in chunks on @p
+  /// pool's workers if given (a frustum's grid is megabytes to write). Keeps
+  /// its memory, unless it is much more than the new size needs (releaseIfOversized).
+  void reset(const Eigen::Vector3i& origin_index, const Eigen::Vector3i& size, double resolution_m,
+             WorkerPool* pool = nullptr);
 
   /// Cells the grid's memory holds (at least numCells()).
   size_t capacityCells() const { return data_.capacity(); }
@@ -185,7 +187,9 @@ inline bool blockHasOccupied(const float* cells) {
 /// max_range_m, including where the cap bulges past the corners).
 Eigen::AlignedBox3d frustumBoundingBox(const StereoCameraModel& camera, const Eigen::Isometry3d& T_W_C);
 
-/// Shapes @p grid to the cells covering @p box, plus @p padding_cells on every side.
-void fitGridToBox(const Eigen::AlignedBox3d& box, double resolution_m, int padding_cells, LocalGrid* grid);
+/// Shapes @p grid to the cells covering @p box, plus @p padding_cells on
+/// every side, all unknown (LocalGrid::reset(), on @p pool's workers if given).
+void fitGridToBox(const Eigen::AlignedBox3d& box, double resolution_m, int padding_cells, LocalGrid* grid,
+                  WorkerPool* pool = nullptr);
 
 }  // namespace stereo_occupancy

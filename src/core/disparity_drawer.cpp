@@ -140,7 +140,7 @@ void DisparityDrawer::prepareGrid(const Eigen::Isometry3d& T_W_C, LocalGrid* gri
   if (!(cells.prod() <= static_cast<double>(config_.max_grid_cells)))
     throw std::invalid_argument("the frustum's grid would have " + cellCount(cells.prod()) +
                                 " cells, more than max_grid_cells = " + std::to_string(config_.max_grid_cells));
-  fitGridToBox(box, config_.resolution_m, padding, grid);
+  fitGridToBox(box, config_.resolution_m, padding, grid, workers_.get());
 }
 
 DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C,

@@ -70,6 +70,24 @@ TEST(LocalGrid, ReleasesTheMemoryOfOneHugeGrid) {
   EXPECT_GE(grid.capacityCells(), 600000u);
 }
 
+// On a pool's workers reset() marks every cell unknown, growing, shrinking
+// and at sizes that end inside a chunk of the fill.
+TEST(LocalGrid, ResetOnWorkersMarksEveryCellUnknown) {
+  for (unsigned threads : {2u, 3u}) {
+    WorkerPool pool(threads);
+    LocalGrid grid;
+    for (const Eigen::Vector3i size : {Eigen::Vector3i(100, 90, 80), Eigen::Vector3i(101, 97, 83),
+                                       Eigen::Vector3i(64, 64, 64), Eigen::Vector3i(3, 2, 1)}) {
+      std::fill(grid.data(), grid.data() + grid.numCells(), 0.5f);  // what the last image drew
+      grid.reset(Eigen::Vector3i(-7, 3, 11), size, 0.25, &pool);
+      ASSERT_EQ(grid.size(), size);
+      ASSERT_EQ(grid.numCells(), static_cast<size_t>(size.prod()));
+      EXPECT_EQ(grid.countKnown(), 0u) << size.transpose() << ", " << threads << " threads";
+      EXPECT_EQ(grid.originIndex(), Eigen::Vector3i(-7, 3, 11));
+    }
+  }
+}
+
 // The block tests (SSE2 on x86-64, NEON on aarch64, a plain loop elsewhere)
 // say what their definitions say, for one telling value at each of the 16
 // places in a block of unknown or of 0, and for blocks with none.
