@@ -16,16 +16,19 @@ bench="$out/build/stereo_occupancy_draw_frames"
 plugin="$out/icount_plugin.so"
 gcc -shared -fPIC -O2 -Wall -Wextra -o "$plugin" "$repo/scripts/aarch64_count/icount_plugin.c"
 
+log="$out/aarch64_instructions.log"
 count() {  # algorithm simd frames -> guest instructions of the whole process
-  qemu-aarch64 -L "$out/sysroot" -plugin "$plugin" "$bench" "$1" "$2" "$3" 2>&1 >/dev/null |
-    sed -n 's/^guest instructions: //p'
+  # qemu 7.x loads plugins of API version 1 (Debian 12's 7.2; 9.x asks for 2 or more).
+  qemu-aarch64 -L "$out/sysroot" -plugin "$plugin" "$bench" "$1" "$2" "$3" >"$log" 2>&1 ||
+    { echo "aarch64_instructions: $1 $2 $3 failed:" >&2; cat "$log" >&2; return 1; }
+  sed -n 's/^guest instructions: //p' "$log"
 }
 echo "| algorithm | free run | M instructions a frame |"
 echo "|---|---|---:|"
 for algorithm in line_pyramid default; do
   for simd in scalar neon; do
-    none=$(count "$algorithm" "$simd" 0)
-    some=$(count "$algorithm" "$simd" "$frames")
+    none=$(count "$algorithm" "$simd" 0) || exit 1
+    some=$(count "$algorithm" "$simd" "$frames") || exit 1
     [ -n "$none" ] && [ -n "$some" ] || { echo "aarch64_instructions: no count for $algorithm $simd" >&2; exit 1; }
     awk -v a="$algorithm" -v s="$simd" -v n="$none" -v m="$some" -v f="$frames" \
       'BEGIN { printf "| %s | %s | %.2f |\n", a, s, (m - n) / f / 1e6 }'

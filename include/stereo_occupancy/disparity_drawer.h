@@ -60,9 +60,10 @@ struct DrawingConfig {
   /// The line drawing's free-run instruction set: every level draws the same
   /// cells and values (tested); lower ones for tests and benchmarks.
   SimdLevel simd = availableSimdLevel();
-  /// Threads that draw (line algorithms) and blur one image; 0: the
-  /// machine's cores, at most WorkerPool::kMaxDefaultThreads. The grid is
-  /// the same bit for bit for any number (tested).
+  /// Threads that work on one image: the grid's reset, the pyramids, the
+  /// line algorithms' lines and sky guard, and the blur; 0: the machine's
+  /// cores, at most WorkerPool::kMaxDefaultThreads. The grid is the same bit
+  /// for bit for any number (tested).
   int threads = 0;
 
   /// The parameters (parameter_table.h): f(spec, member) for each, the
@@ -71,7 +72,8 @@ struct DrawingConfig {
   static void forEachParameter(Self& c, F&& f) {
     f(textParameter("algorithm", "drawing algorithm (section V, VI; bounded: beyond the paper)"), c.algorithm);
     f(numberParameter("resolution_m", "m", 0.01, 10.0, "grid cell edge c"), c.resolution_m);
-    f(numberParameter("threads", "", 0.0, 64.0, "drawing and blur threads (0: the machine's cores, at most 4)"),
+    f(numberParameter("threads", "", 0.0, 64.0,
+                      "threads of one image's drawing and blur (0: the machine's cores, at most 4)"),
       c.threads);
     InverseSensorModelConfig::forEachParameter(c.sensor_model, f);
     BlurConfig::forEachParameter(c.blur, f);
@@ -112,7 +114,9 @@ class DisparityDrawer {
   /// @throws std::invalid_argument for a wrong image type or size, or a bad pose.
   DrawStatistics draw(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C, LocalGrid* grid);
 
-  /// Shapes @p grid to the frustum's bounding box (padded for the blur) and clears it.
+  /// Shapes @p grid to the frustum's bounding box (padded for the blur) and
+  /// clears it, on the drawer's workers (so, like the drawing, on one
+  /// thread at a time).
   /// @throws std::invalid_argument if the box has more than max_grid_cells cells.
   void prepareGrid(const Eigen::Isometry3d& T_W_C, LocalGrid* grid) const;
 

@@ -44,8 +44,9 @@ class DisparityPyramid {
              WorkerPool* pool = nullptr);
   /// The min pyramid into @p min_pyramid and the max pyramid into @p
   /// max_pyramid (either may be null) of the same image, as build() builds
-  /// them, in one pass over the image: each pair of its rows is read once
-  /// for both (the bounded algorithms draw from both).
+  /// them, in one pass over the image's memory: each pair of its rows is
+  /// reduced into both while it is in the cache (the bounded algorithms
+  /// draw from both).
   static void buildPyramids(const cv::Mat& disparity, const StereoCameraModel& camera, int top_level,
                             DisparityPyramid* min_pyramid, DisparityPyramid* max_pyramid, WorkerPool* pool = nullptr);
 

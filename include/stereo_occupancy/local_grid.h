@@ -11,7 +11,7 @@
 #include <vector>
 #if defined(__SSE2__)
 #include <emmintrin.h>
-#elif defined(__aarch64__) && defined(__ARM_NEON)
+#elif defined(__aarch64__) && defined(__ARM_NEON) && !defined(__AARCH64EB__)
 #define STEREO_OCCUPANCY_NEON_BLOCKS 1
 #include <arm_neon.h>
 #endif
@@ -124,7 +124,7 @@ inline bool blockHasInformation(const float* cells) {
     hit = _mm_or_ps(hit, _mm_and_ps(_mm_cmpneq_ps(v, unknown), _mm_cmpneq_ps(v, zero)));
   }
   return _mm_movemask_ps(hit) != 0;
-#elif STEREO_OCCUPANCY_NEON_BLOCKS
+#elif defined(STEREO_OCCUPANCY_NEON_BLOCKS)
   const float32x4_t unknown = vdupq_n_f32(LocalGrid::kUnknown), zero = vdupq_n_f32(0.0f);
   uint32x4_t hit = vdupq_n_u32(0);
   for (int j = 0; j < kInformationBlock; j += 4) {  // neither unknown nor 0 (NaN included, as cmpneq)
@@ -148,7 +148,7 @@ inline bool blockHasKnown(const float* cells) {
   __m128 hit = _mm_setzero_ps();
   for (int j = 0; j < kInformationBlock; j += 4) hit = _mm_or_ps(hit, _mm_cmpneq_ps(_mm_loadu_ps(cells + j), unknown));
   return _mm_movemask_ps(hit) != 0;
-#elif STEREO_OCCUPANCY_NEON_BLOCKS
+#elif defined(STEREO_OCCUPANCY_NEON_BLOCKS)
   const float32x4_t unknown = vdupq_n_f32(LocalGrid::kUnknown);
   uint32x4_t hit = vdupq_n_u32(0);
   for (int j = 0; j < kInformationBlock; j += 4)
@@ -170,7 +170,7 @@ inline bool blockHasOccupied(const float* cells) {
   __m128 hit = zero;
   for (int j = 0; j < kInformationBlock; j += 4) hit = _mm_or_ps(hit, _mm_cmpgt_ps(_mm_loadu_ps(cells + j), zero));
   return _mm_movemask_ps(hit) != 0;
-#elif STEREO_OCCUPANCY_NEON_BLOCKS
+#elif defined(STEREO_OCCUPANCY_NEON_BLOCKS)
   const float32x4_t zero = vdupq_n_f32(0.0f);
   uint32x4_t hit = vdupq_n_u32(0);
   for (int j = 0; j < kInformationBlock; j += 4) hit = vorrq_u32(hit, vcgtq_f32(vld1q_f32(cells + j), zero));

@@ -169,7 +169,8 @@ void DisparityPyramid::buildPyramids(const cv::Mat& disparity, const StereoCamer
         for (const FirstLevels& f : first) {
           if (!f.d0) continue;
           float* out = f.d0->ptr<float>(y);
-          for (int x = 0; x < disparity.cols; ++x) out[x] = valid(in[x]) ? in[x] : f.invalid;
+          const float invalid = f.invalid;  // a local: stores to out cannot change it
+          for (int x = 0; x < disparity.cols; ++x) out[x] = valid(in[x]) ? in[x] : invalid;
         }
       }
     });

@@ -6,7 +6,7 @@
 #if defined(__SSE2__) && defined(__x86_64__)
 #define STEREO_OCCUPANCY_X86_64_SIMD 1
 #include <emmintrin.h>
-#elif defined(__aarch64__) && defined(__ARM_NEON)
+#elif defined(__aarch64__) && defined(__ARM_NEON) && !defined(__AARCH64EB__)  // lanes as little-endian
 #define STEREO_OCCUPANCY_AARCH64_SIMD 1
 #include <arm_neon.h>
 #endif

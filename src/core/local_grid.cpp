@@ -20,14 +20,15 @@ void LocalGrid::reset(const Eigen::Vector3i& origin_index, const Eigen::Vector3i
   resolution_m_ = resolution_m;
   const size_t cells = static_cast<size_t>(size_.x()) * size_.y() * size_.z();
   releaseIfOversized(&data_, cells);
-  const size_t chunks = (cells + kFillChunkCells - 1) / kFillChunkCells;
+  const size_t kept = std::min(data_.size(), cells);  // the cells that hold the last image's values
+  const size_t chunks = (kept + kFillChunkCells - 1) / kFillChunkCells;
   if (!pool || pool->size() < 2 || chunks < 2) {
     data_.assign(cells, kUnknown);
     return;
   }
-  data_.resize(cells);  // a grown grid's new cells are written twice: rare, the grids keep their memory
+  data_.resize(cells, kUnknown);  // a grown grid's new cells: unknown already
   pool->run(chunks, [&](size_t chunk, unsigned) {
-    const size_t begin = chunk * kFillChunkCells, end = std::min(cells, begin + kFillChunkCells);
+    const size_t begin = chunk * kFillChunkCells, end = std::min(kept, begin + kFillChunkCells);
     std::fill(data_.begin() + begin, data_.begin() + end, kUnknown);
   });
 }
