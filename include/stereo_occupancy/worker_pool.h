@@ -3,6 +3,7 @@
 /// The threads one mapper uses to draw and blur an image (beyond the paper):
 /// a job's parts run on all of them, the caller's thread included.
 
+#include <algorithm>
 #include <atomic>
 #include <condition_variable>
 #include <cstddef>
@@ -38,6 +39,13 @@ class WorkerPool {
   /// worker (worker < size()), and returns when all have returned. The
   /// first exception a task throws is rethrown here, after the others ran.
   void run(size_t n, const std::function<void(size_t i, unsigned worker)>& task);
+
+  /// Calls part(begin, end) for the consecutive ranges of at most @p chunk
+  /// (> 0) that cover [0, n), as run()'s parts.
+  template <typename Part>
+  void runInChunks(size_t n, size_t chunk, const Part& part) {
+    run((n + chunk - 1) / chunk, [&](size_t i, unsigned) { part(i * chunk, std::min(n, (i + 1) * chunk)); });
+  }
 
  private:
   void serve(unsigned worker);

@@ -436,8 +436,7 @@ void LineDrawer::mergeWorkerGrids(const std::vector<char>& used, LocalGrid* grid
   constexpr size_t kBlock = kInformationBlock;
   float* cells = grid->data();
   const size_t n = grid->numCells();
-  pool_->run((n + kMergeChunkCells - 1) / kMergeChunkCells, [&](size_t chunk, unsigned) {
-    const size_t begin = chunk * kMergeChunkCells, end = std::min(n, begin + kMergeChunkCells);
+  pool_->runInChunks(n, kMergeChunkCells, [&](size_t begin, size_t end) {
     for (size_t w = 1; w < used.size(); ++w) {
       if (!used[w]) continue;
       float* other = worker_grids_[w - 1].data();

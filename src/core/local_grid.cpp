@@ -21,14 +21,12 @@ void LocalGrid::reset(const Eigen::Vector3i& origin_index, const Eigen::Vector3i
   const size_t cells = static_cast<size_t>(size_.x()) * size_.y() * size_.z();
   releaseIfOversized(&data_, cells);
   const size_t kept = std::min(data_.size(), cells);  // the cells that hold the last image's values
-  const size_t chunks = (kept + kFillChunkCells - 1) / kFillChunkCells;
-  if (!pool || pool->size() < 2 || chunks < 2) {
+  if (!pool || pool->size() < 2 || kept <= kFillChunkCells) {
     data_.assign(cells, kUnknown);
     return;
   }
   data_.resize(cells, kUnknown);  // a grown grid's new cells: unknown already
-  pool->run(chunks, [&](size_t chunk, unsigned) {
-    const size_t begin = chunk * kFillChunkCells, end = std::min(kept, begin + kFillChunkCells);
+  pool->runInChunks(kept, kFillChunkCells, [&](size_t begin, size_t end) {
     std::fill(data_.begin() + begin, data_.begin() + end, kUnknown);
   });
 }
