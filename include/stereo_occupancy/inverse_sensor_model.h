@@ -64,6 +64,12 @@ struct InverseSensorModelConfig {
   /// or trunk is matched in some pixels and missed in their neighbours, whose
   /// sky rays would otherwise call its cells free (docs/quality.md). 0: off.
   int sky_guard_cells = 1;
+  /// kSurface: the gap says nothing only within this many cells (Chebyshev)
+  /// of a cell the same image measured as occupied; farther from every
+  /// measured cell it is free space (p_free). A noise hit in front of a
+  /// surface lies in the gaps of later views of that surface and was never
+  /// cleared (docs/quality.md). 0: off, the whole gap says nothing.
+  int gap_guard_cells = 1;
 
   /// The parameters (parameter_table.h): f(spec, member) for each.
   template <typename Self, typename F>
@@ -79,6 +85,9 @@ struct InverseSensorModelConfig {
     f(numberParameter("sky_guard_cells", "cells", 0, 2,
                       "surface: a ray without a range says nothing this near a cell the image measured"),
       c.sky_guard_cells);
+    f(numberParameter("gap_guard_cells", "cells", 0, 2,
+                      "surface: the gap says nothing only this near a cell the image measured; 0: everywhere"),
+      c.gap_guard_cells);
     f(numberParameter("tail_sigmas", "Δl", 0.0, 3.0, "gaussian: how far behind the peak a measurement speaks"),
       c.tail_sigmas);
     f(numberParameter("k_m", "m", 0.001, 10.0, "significance k of one measurement (eq. 9)"), c.k_m);
@@ -91,7 +100,8 @@ struct InverseSensorModelConfig {
   bool operator==(const InverseSensorModelConfig& o) const {
     return profile == o.profile && k_m == o.k_m && p_min == o.p_min && p_max == o.p_max &&
            tail_sigmas == o.tail_sigmas && p_hit == o.p_hit && p_free == o.p_free && p_sky == o.p_sky &&
-           free_gap_sigmas == o.free_gap_sigmas && sky_guard_cells == o.sky_guard_cells;
+           free_gap_sigmas == o.free_gap_sigmas && sky_guard_cells == o.sky_guard_cells &&
+           gap_guard_cells == o.gap_guard_cells;
   }
 };
 

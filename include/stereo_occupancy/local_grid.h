@@ -85,9 +85,18 @@ class LocalGrid {
   /// @p pool, slabs of z on its workers: the same grid and count.
   size_t silenceNearOccupied(float value, int radius, WorkerPool* pool = nullptr);
 
+  /// Sets the cells holding 0 (no information) that lie farther than
+  /// @p radius cells (Chebyshev) from every occupied cell to @p free_value;
+  /// returns how many. With the surface profile's gap: the gap says nothing
+  /// next to what the image measured, and is free space elsewhere. With a
+  /// @p pool, on its workers: the same grid and count.
+  size_t freeZerosAwayFromOccupied(float free_value, int radius, WorkerPool* pool = nullptr);
+
  private:
   /// silenceNearOccupied() for the occupied cells in the slabs [z_begin, z_end).
   size_t silenceSlabs(float value, int radius, int z_begin, int z_end);
+  /// Replaces @p from by @p to in every cell; returns how many.
+  size_t replaceValue(float from, float to, WorkerPool* pool);
 
   Eigen::Vector3i origin_index_ = Eigen::Vector3i::Zero();
   Eigen::Vector3i size_ = Eigen::Vector3i::Zero();

@@ -2,8 +2,10 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 
 namespace stereo_occupancy {
 
@@ -55,6 +57,36 @@ size_t LocalGrid::silenceNearOccupied(float value, int radius, WorkerPool* pool)
     });
   size_t total = 0;
   for (size_t n : silenced) total += n;
+  return total;
+}
+
+size_t LocalGrid::freeZerosAwayFromOccupied(float free_value, int radius, WorkerPool* pool) {
+  if (radius <= 0) return 0;
+  // The zeros are marked, the marks near an occupied cell go back to 0 (the
+  // sky guard's pass), and the marks left become free space. The mark is
+  // the negative normal float nearest 0, which no profile draws (a
+  // denormal would read as 0 where denormals are flushed).
+  const float mark = -std::numeric_limits<float>::min();
+  const size_t zeros = replaceValue(0.0f, mark, pool);
+  const size_t near = silenceNearOccupied(mark, radius, pool);
+  replaceValue(mark, free_value, pool);
+  return zeros - near;
+}
+
+size_t LocalGrid::replaceValue(float from, float to, WorkerPool* pool) {
+  auto replaceIn = [&](size_t begin, size_t end) {
+    size_t n = 0;
+    for (size_t i = begin; i < end; ++i)
+      if (data_[i] == from) {
+        data_[i] = to;
+        ++n;
+      }
+    return n;
+  };
+  if (!pool || pool->size() < 2 || data_.size() <= kFillChunkCells) return replaceIn(0, data_.size());
+  std::atomic<size_t> total{0};
+  pool->runInChunks(data_.size(), kFillChunkCells,
+                    [&](size_t begin, size_t end) { total += replaceIn(begin, end); });
   return total;
 }
 

@@ -6,9 +6,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <vector>
 
 #include "stereo_occupancy/disparity_drawer.h"
+#include "stereo_occupancy/worker_pool.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
 
 using namespace stereo_occupancy;
@@ -256,4 +258,74 @@ TEST(SurfaceProfile, SilenceNearOccupiedTouchesOnlyTheSkyNearHits) {
   // Around (4, 4, 4) the 124 within two cells but the 26 within one; around
   // the corner 26, one of them, (2, 2, 2), shared.
   EXPECT_EQ(grid.silenceNearOccupied(sky, 2), (124u - 26u) + 26u - 1u);
+}
+
+// The gap guard: a wall at 20.1 m, where the gap is Δl = 0.95 m deep (four
+// cells). Without the guard the whole gap says nothing, so a noise hit two
+// cells in front of the wall would never be cleared by later views of it;
+// with one cell of guard the gap is free there and says nothing only in the
+// cell next to the wall's.
+TEST(SurfaceProfile, GapGuardFreesTheGapAwayFromHits) {
+  SyntheticScene scene;
+  scene.addBox({20.1, -20.0, -5.0}, {22.0, 20.0, 10.0});
+  const cv::Mat disparity = renderDisparity(scene, StereoCameraModel(StereoCameraConfig()), camera());
+  auto draw = [&](int gap_guard_cells) {
+    DrawingConfig config = surfaceDrawing(DrawingAlgorithm::kLinePyramidBounded);
+    config.sensor_model.gap_guard_cells = gap_guard_cells;
+    DisparityDrawer drawer(StereoCameraConfig(), config);
+    LocalGrid grid;
+    drawer.draw(disparity, camera(), &grid);
+    return grid;
+  };
+  const LocalGrid whole_gap = draw(0), guarded = draw(1);
+  const float free = static_cast<float>(logit(surfaceConfig().p_free));
+  int columns = 0;
+  for (double y = -1.0; y < 1.0; y += kCell)
+    for (double z = 1.0; z < 3.0; z += kCell) {
+      ++columns;
+      EXPECT_GT(valueAt(whole_gap, {20.15, y, z}), 0.0f);  // the wall's cell
+      EXPECT_GT(valueAt(guarded, {20.15, y, z}), 0.0f);
+      EXPECT_EQ(valueAt(whole_gap, {19.9, y, z}), 0.0f);  // next to it: the gap in both
+      EXPECT_EQ(valueAt(guarded, {19.9, y, z}), 0.0f);
+      EXPECT_EQ(valueAt(whole_gap, {19.6, y, z}), 0.0f);  // two cells in front
+      EXPECT_EQ(valueAt(guarded, {19.6, y, z}), free);
+      EXPECT_EQ(valueAt(whole_gap, {15.0, y, z}), free);  // before the gap: free in both
+      EXPECT_EQ(valueAt(guarded, {15.0, y, z}), free);
+    }
+  EXPECT_EQ(columns, 64);
+}
+
+// The guard's pass itself: only zeros, only farther than the radius from
+// every occupied cell; nothing at radius 0; the same on a pool's workers.
+TEST(SurfaceProfile, FreeZerosAwayFromOccupiedKeepsZerosNearHits) {
+  LocalGrid grid;
+  grid.reset({0, 0, 0}, {72, 64, 64}, kCell);  // more cells than one part of the pool's pass
+  const float free = -0.85f, other = -0.7f;
+  grid.at(10, 10, 10) = 0.9f;
+  grid.at(11, 10, 10) = 0.0f;  // Chebyshev distances 1, 2, 3 from the hit
+  grid.at(12, 11, 10) = 0.0f;
+  grid.at(13, 10, 8) = 0.0f;
+  grid.at(9, 10, 10) = other;  // not a zero: kept
+  grid.at(70, 60, 60) = 0.0f;  // far from every hit
+  const LocalGrid drawn = grid;
+  EXPECT_EQ(grid.freeZerosAwayFromOccupied(free, 0), 0u);
+  EXPECT_EQ(std::memcmp(grid.data(), drawn.data(), drawn.numCells() * sizeof(float)), 0);
+  EXPECT_EQ(grid.freeZerosAwayFromOccupied(free, 1), 3u);
+  EXPECT_EQ(grid.at(11, 10, 10), 0.0f);
+  EXPECT_EQ(grid.at(12, 11, 10), free);
+  EXPECT_EQ(grid.at(13, 10, 8), free);
+  EXPECT_EQ(grid.at(70, 60, 60), free);
+  EXPECT_EQ(grid.at(9, 10, 10), other);
+  EXPECT_EQ(grid.at(10, 10, 10), 0.9f);
+  EXPECT_EQ(grid.at(0, 0, 0), LocalGrid::kUnknown);
+  LocalGrid radius_two = drawn;
+  EXPECT_EQ(radius_two.freeZerosAwayFromOccupied(free, 2), 2u);
+  EXPECT_EQ(radius_two.at(12, 11, 10), 0.0f);
+  EXPECT_EQ(radius_two.at(13, 10, 8), free);
+  for (unsigned threads : {2u, 3u}) {
+    WorkerPool pool(threads);
+    LocalGrid shared = drawn;
+    EXPECT_EQ(shared.freeZerosAwayFromOccupied(free, 1, &pool), 3u) << threads;
+    EXPECT_EQ(std::memcmp(shared.data(), grid.data(), grid.numCells() * sizeof(float)), 0) << threads;
+  }
 }
