@@ -101,6 +101,10 @@ class DisparityDrawer {
  public:
   /// @throws std::invalid_argument if a config is not valid.
   DisparityDrawer(const StereoCameraConfig& camera, const DrawingConfig& config);
+  /// Neither copied nor moved: its line drawer and ray tracer refer to its
+  /// own camera and table (a moved drawer crashed).
+  DisparityDrawer(const DisparityDrawer&) = delete;
+  DisparityDrawer& operator=(const DisparityDrawer&) = delete;
 
   const StereoCameraModel& camera() const { return camera_; }
   const DrawingConfig& config() const { return config_; }
