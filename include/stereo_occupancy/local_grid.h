@@ -92,11 +92,29 @@ class LocalGrid {
   /// @p pool, on its workers: the same grid and count.
   size_t freeZerosAwayFromOccupied(float free_value, int radius, WorkerPool* pool = nullptr);
 
+  /// The surface profile's two guards at once: freeZerosAwayFromOccupied(
+  /// @p free_value, @p gap_radius), then silenceNearOccupied(@p sky_value,
+  /// @p sky_radius), the same grid in one pass over the occupied cells and
+  /// one over the grid. Returns the zeros set free; a radius of 0 is that
+  /// guard off.
+  size_t applySurfaceGuards(float sky_value, int sky_radius, float free_value, int gap_radius,
+                            WorkerPool* pool = nullptr);
+
  private:
-  /// silenceNearOccupied() for the occupied cells in the slabs [z_begin, z_end).
-  size_t silenceSlabs(float value, int radius, int z_begin, int z_end);
-  /// Replaces @p from by @p to in every cell; returns how many.
-  size_t replaceValue(float from, float to, WorkerPool* pool);
+  /// What the guards' first pass looks for around each occupied cell.
+  struct Guard {
+    float sky_value;  ///< cells holding it within sky_radius become 0
+    int sky_radius;
+    float gap_value;  ///< cells holding it within gap_radius are kept 0
+    int gap_radius;
+  };
+  /// The first pass, in slabs of z on @p pool's workers; returns the cells it marked.
+  size_t guardNearOccupied(const Guard& guard, WorkerPool* pool);
+  /// guardNearOccupied() for the occupied cells in the slabs [z_begin, z_end).
+  size_t guardSlabs(const Guard& guard, int z_begin, int z_end);
+  /// The second pass: the zeros left become @p free_value, the marks 0;
+  /// returns the zeros set free.
+  size_t settleMarks(float free_value, WorkerPool* pool);
 
   Eigen::Vector3i origin_index_ = Eigen::Vector3i::Zero();
   Eigen::Vector3i size_ = Eigen::Vector3i::Zero();
@@ -144,6 +162,32 @@ inline bool blockHasInformation(const float* cells) {
 #else
   bool hit = false;
   for (int j = 0; j < kInformationBlock; ++j) hit |= cells[j] != LocalGrid::kUnknown && cells[j] != 0.0f;
+  return hit;
+#endif
+}
+
+/// True if one of the kInformationBlock cells from @p cells holds exactly
+/// @p a or @p b (SSE2 or NEON where available).
+inline bool blockHolds(const float* cells, float a, float b) {
+#if defined(__SSE2__)
+  const __m128 va = _mm_set1_ps(a), vb = _mm_set1_ps(b);
+  __m128 hit = _mm_setzero_ps();
+  for (int j = 0; j < kInformationBlock; j += 4) {
+    const __m128 v = _mm_loadu_ps(cells + j);
+    hit = _mm_or_ps(hit, _mm_or_ps(_mm_cmpeq_ps(v, va), _mm_cmpeq_ps(v, vb)));
+  }
+  return _mm_movemask_ps(hit) != 0;
+#elif defined(STEREO_OCCUPANCY_NEON_BLOCKS)
+  const float32x4_t va = vdupq_n_f32(a), vb = vdupq_n_f32(b);
+  uint32x4_t hit = vdupq_n_u32(0);
+  for (int j = 0; j < kInformationBlock; j += 4) {
+    const float32x4_t v = vld1q_f32(cells + j);
+    hit = vorrq_u32(hit, vorrq_u32(vceqq_f32(v, va), vceqq_f32(v, vb)));
+  }
+  return vmaxvq_u32(hit) != 0;
+#else
+  bool hit = false;
+  for (int j = 0; j < kInformationBlock; ++j) hit |= cells[j] == a || cells[j] == b;
   return hit;
 #endif
 }

@@ -173,11 +173,9 @@ DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::
         ray_tracer_.drawPyramidBounded(min_pyramid_, max_pyramid_, *bound_, T_W_C, grid, &stats);
       break;
   }
-  if (config_.sensor_model.profile == SensorProfile::kSurface) {
-    // The gap first: the sky guard's zeros are no gap.
-    grid->freeZerosAwayFromOccupied(table_.freeLogOdds(), config_.sensor_model.gap_guard_cells, workers_.get());
-    grid->silenceNearOccupied(table_.skyLogOdds(), config_.sensor_model.sky_guard_cells, workers_.get());
-  }
+  if (config_.sensor_model.profile == SensorProfile::kSurface)
+    grid->applySurfaceGuards(table_.skyLogOdds(), config_.sensor_model.sky_guard_cells, table_.freeLogOdds(),
+                             config_.sensor_model.gap_guard_cells, workers_.get());
   if (config_.count_different_cells) stats.different_grid_cells = grid->countKnown();
   return stats;
 }

@@ -4,6 +4,7 @@
 #include <array>
 #include <atomic>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 
@@ -35,72 +36,83 @@ void LocalGrid::reset(const Eigen::Vector3i& origin_index, const Eigen::Vector3i
 
 void LocalGrid::clear() { std::fill(data_.begin(), data_.end(), kUnknown); }
 
+namespace {
+/// Marks a cell that the guards' second pass sets to 0: the negative normal
+/// float nearest 0, which no profile draws (a denormal would read as 0
+/// where denormals are flushed).
+constexpr float kKeepMark = -std::numeric_limits<float>::min();
+/// A value no cell holds: the guard of that value is off.
+constexpr float kNoValue = std::numeric_limits<float>::quiet_NaN();
+}  // namespace
+
 size_t LocalGrid::silenceNearOccupied(float value, int radius, WorkerPool* pool) {
   if (radius <= 0) return 0;
+  return guardNearOccupied({value, radius, kNoValue, 0}, pool);
+}
+
+size_t LocalGrid::freeZerosAwayFromOccupied(float free_value, int radius, WorkerPool* pool) {
+  if (radius <= 0) return 0;
+  guardNearOccupied({kNoValue, 0, 0.0f, radius}, pool);
+  return settleMarks(free_value, pool);
+}
+
+size_t LocalGrid::applySurfaceGuards(float sky_value, int sky_radius, float free_value, int gap_radius,
+                                     WorkerPool* pool) {
+  if (gap_radius <= 0) {
+    silenceNearOccupied(sky_value, sky_radius, pool);
+    return 0;
+  }
+  guardNearOccupied({sky_radius > 0 ? sky_value : kNoValue, sky_radius, 0.0f, gap_radius}, pool);
+  return settleMarks(free_value, pool);
+}
+
+size_t LocalGrid::guardNearOccupied(const Guard& guard, WorkerPool* pool) {
+  const int radius = std::max(guard.sky_radius, guard.gap_radius);
   const unsigned workers = pool ? pool->size() : 1;
   // Two chunks of slabs per worker, each at least 2·radius + 1 thick: the
   // even chunks first, then the odd ones, so that no two chunks running at
   // once reach the same cell (a chunk writes radius slabs beyond its ends).
-  // A cell is silenced whoever sees it first: the grid and the count do not
+  // A cell is marked whoever sees it first: the grid and the count do not
   // depend on the order.
   const int min_slabs = 2 * radius + 1;
   const int chunk_slabs = std::max(min_slabs, (size_.z() + 2 * static_cast<int>(workers) - 1) /
                                                   (2 * static_cast<int>(workers)));
   const int chunks = (size_.z() + chunk_slabs - 1) / chunk_slabs;
-  if (workers == 1 || chunks < 2) return silenceSlabs(value, radius, 0, size_.z());
-  std::vector<size_t> silenced(static_cast<size_t>(chunks), 0);
+  if (workers == 1 || chunks < 2) return guardSlabs(guard, 0, size_.z());
+  std::vector<size_t> marked(static_cast<size_t>(chunks), 0);
   for (int parity = 0; parity < 2; ++parity)
     pool->run(static_cast<size_t>(chunks - parity + 1) / 2, [&](size_t i, unsigned) {
       const int chunk = 2 * static_cast<int>(i) + parity;
       const int z_begin = chunk * chunk_slabs;
-      silenced[chunk] = silenceSlabs(value, radius, z_begin, std::min(size_.z(), z_begin + chunk_slabs));
+      marked[chunk] = guardSlabs(guard, z_begin, std::min(size_.z(), z_begin + chunk_slabs));
     });
   size_t total = 0;
-  for (size_t n : silenced) total += n;
+  for (size_t n : marked) total += n;
   return total;
 }
 
-size_t LocalGrid::freeZerosAwayFromOccupied(float free_value, int radius, WorkerPool* pool) {
-  if (radius <= 0) return 0;
-  // The zeros are marked, the marks near an occupied cell go back to 0 (the
-  // sky guard's pass), and the marks left become free space. The mark is
-  // the negative normal float nearest 0, which no profile draws (a
-  // denormal would read as 0 where denormals are flushed).
-  const float mark = -std::numeric_limits<float>::min();
-  const size_t zeros = replaceValue(0.0f, mark, pool);
-  const size_t near = silenceNearOccupied(mark, radius, pool);
-  replaceValue(mark, free_value, pool);
-  return zeros - near;
-}
-
-size_t LocalGrid::replaceValue(float from, float to, WorkerPool* pool) {
-  auto replaceIn = [&](size_t begin, size_t end) {
-    size_t n = 0;
-    for (size_t i = begin; i < end; ++i)
-      if (data_[i] == from) {
-        data_[i] = to;
-        ++n;
-      }
-    return n;
-  };
-  if (!pool || pool->size() < 2 || data_.size() <= kFillChunkCells) return replaceIn(0, data_.size());
-  std::atomic<size_t> total{0};
-  pool->runInChunks(data_.size(), kFillChunkCells,
-                    [&](size_t begin, size_t end) { total += replaceIn(begin, end); });
-  return total;
-}
-
-size_t LocalGrid::silenceSlabs(float value, int radius, int z_begin, int z_end) {
-  size_t silenced = 0;
-  auto silenceAround = [&](int x, int y, int z) {
+size_t LocalGrid::guardSlabs(const Guard& guard, int z_begin, int z_end) {
+  const int radius = std::max(guard.sky_radius, guard.gap_radius);
+  // The sky guard's cells become 0 at once (nothing else reads them); the
+  // gap's zeros near a hit are marked, so that settleMarks() can tell them
+  // from the zeros far from every hit.
+  const float sky_to = guard.gap_radius > 0 ? kKeepMark : 0.0f;
+  // A guard that is off holds a value no cell holds: only two guards of
+  // different radii need the distance.
+  const bool by_distance = guard.sky_radius > 0 && guard.gap_radius > 0 && guard.sky_radius != guard.gap_radius;
+  size_t marked = 0;
+  auto markAround = [&](int x, int y, int z) {
     for (int k = std::max(0, z - radius); k <= std::min(size_.z() - 1, z + radius); ++k)
       for (int j = std::max(0, y - radius); j <= std::min(size_.y() - 1, y + radius); ++j)
         for (int h = std::max(0, x - radius); h <= std::min(size_.x() - 1, x + radius); ++h) {
           float& cell = data_[linearIndex(h, j, k)];
-          if (cell == value) {
-            cell = 0.0f;
-            ++silenced;
-          }
+          const bool sky = cell == guard.sky_value, gap = cell == guard.gap_value;
+          if (!sky && !gap) continue;
+          if (by_distance &&
+              std::max({std::abs(h - x), std::abs(j - y), std::abs(k - z)}) > (sky ? guard.sky_radius : guard.gap_radius))
+            continue;
+          cell = sky ? sky_to : kKeepMark;
+          ++marked;
         }
   };
   for (int z = z_begin; z < z_end; ++z)
@@ -111,10 +123,33 @@ size_t LocalGrid::silenceSlabs(float value, int radius, int z_begin, int z_end) 
           x += kInformationBlock - 1;  // nothing occupied in these 16 cells
           continue;
         }
-        if (row[x] > 0.0f) silenceAround(x, y, z);
+        if (row[x] > 0.0f) markAround(x, y, z);
       }
     }
-  return silenced;
+  return marked;
+}
+
+size_t LocalGrid::settleMarks(float free_value, WorkerPool* pool) {
+  // The gap's zeros and the marks are few: only the blocks that hold one are written.
+  auto settleCells = [free_value](float* cells, size_t n) {
+    size_t freed = 0;
+    for (size_t i = 0; i < n; ++i) {
+      const float v = cells[i];
+      freed += v == 0.0f;
+      cells[i] = v == 0.0f ? free_value : (v == kKeepMark ? 0.0f : v);
+    }
+    return freed;
+  };
+  auto settle = [&](size_t begin, size_t end) {
+    size_t freed = 0, i = begin;
+    for (; i + kInformationBlock <= end; i += kInformationBlock)
+      if (blockHolds(data_.data() + i, 0.0f, kKeepMark)) freed += settleCells(data_.data() + i, kInformationBlock);
+    return freed + settleCells(data_.data() + i, end - i);
+  };
+  if (!pool || pool->size() < 2 || data_.size() <= kFillChunkCells) return settle(0, data_.size());
+  std::atomic<size_t> total{0};
+  pool->runInChunks(data_.size(), kFillChunkCells, [&](size_t begin, size_t end) { total += settle(begin, end); });
+  return total;
 }
 
 size_t LocalGrid::countKnown() const {

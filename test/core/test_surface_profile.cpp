@@ -329,3 +329,41 @@ TEST(SurfaceProfile, FreeZerosAwayFromOccupiedKeepsZerosNearHits) {
     EXPECT_EQ(std::memcmp(shared.data(), grid.data(), grid.numCells() * sizeof(float)), 0) << threads;
   }
 }
+
+// Both guards in one pass are the gap guard, then the sky guard: the same
+// grid for every pair of radii, on one thread and on a pool.
+TEST(SurfaceProfile, BothGuardsAtOnceAreTheGapGuardThenTheSkyGuard) {
+  const float free = -0.85f, sky = std::nextafter(free, -1.0f);
+  LocalGrid drawn;
+  drawn.reset({0, 0, 0}, {72, 64, 64}, kCell);
+  // Hits, and around them zeros, sky and free cells at Chebyshev distances 1-3.
+  const float values[] = {0.0f, sky, free, 0.0f, sky};
+  int n = 0;
+  for (int z = 4; z < 60; z += 9)
+    for (int y = 4; y < 60; y += 7)
+      for (int x = 4; x < 68; x += 8) {
+        drawn.at(x, y, z) = 0.9f;
+        for (int d = 1; d <= 3; ++d) {
+          drawn.at(x + d, y, z) = values[n++ % 5];
+          drawn.at(x - d, y + (d > 1), z) = values[n++ % 5];
+        }
+      }
+  drawn.at(70, 62, 62) = 0.0f;  // far from every hit
+  for (int sky_radius : {0, 1, 2})
+    for (int gap_radius : {0, 1, 2}) {
+      LocalGrid expected = drawn;
+      const size_t freed = expected.freeZerosAwayFromOccupied(free, gap_radius);
+      expected.silenceNearOccupied(sky, sky_radius);
+      for (unsigned threads : {1u, 2u, 3u}) {
+        WorkerPool pool(threads);
+        LocalGrid both = drawn;
+        EXPECT_EQ(both.applySurfaceGuards(sky, sky_radius, free, gap_radius, &pool), freed)
+            << sky_radius << gap_radius << threads;
+        EXPECT_EQ(std::memcmp(both.data(), expected.data(), expected.numCells() * sizeof(float)), 0)
+            << sky_radius << " " << gap_radius << " " << threads;
+      }
+    }
+  LocalGrid one_guard = drawn;
+  EXPECT_GT(one_guard.applySurfaceGuards(sky, 1, free, 1), 100u);  // the test sees both guards work
+  EXPECT_GT(drawn.silenceNearOccupied(sky, 1), 100u);
+}
