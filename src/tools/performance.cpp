@@ -14,6 +14,7 @@
 #include <functional>
 #include <iomanip>
 #include <iostream>
+#include <map>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -22,6 +23,7 @@
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
+#include "stereo_occupancy/parameter_table.h"
 #include "stereo_occupancy/sim/flight_simulation.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
 #include "stereo_occupancy/time_statistics.h"
@@ -127,6 +129,7 @@ int run(int argc, char** argv) {
   std::string only, scenario_name, flight;
   long frame = 0, pace_ms = 0;
   int threads = 1;
+  std::map<std::string, double> model_values;  // the default stage's sensor model, by name
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--repeat") {
@@ -143,11 +146,13 @@ int run(int argc, char** argv) {
       pace_ms = so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 0, 10000);
     } else if (a == "--threads") {
       threads = static_cast<int>(so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 1, 64));
+    } else if (a == "--model") {
+      so::tools::addNameValue(argc, argv, &i, &model_values);
     } else if (a == "--frame") {
       frame = so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 0, 1000000);
     } else if (a == "--help") {
       std::cout << "usage: performance [--repeat N] [--only STAGE] [--scenario NAME [--frame K]] | --flight NAME "
-                   "[--pace-ms MS]; either with [--threads N]\n"
+                   "[--pace-ms MS]; either with [--threads N]; [--model NAME=VALUE]...\n"
                    "Times the mapper's stages on the Table I frame (or frame K of a simulated flight, with its "
                    "stereo effects, seed 1) at 0.25 m (median and min-max of N runs, default 21) and OctoMap's "
                    "insertPointCloud on the same frame.\n"
@@ -155,6 +160,8 @@ int run(int argc, char** argv) {
                    "map, on every frame of a simulated flight, with their mean, median, p99 and maximum; "
                    "--pace-ms MS sleeps MS before each frame, as between a camera's images.\n"
                    "--threads N: draw, blur and fuse on N threads (default 1).\n"
+                   "--model NAME=VALUE: a sensor model parameter of the default stage (e.g. gap_guard_cells=0), "
+                   "repeatable.\n"
                    "STAGE: "
                 << kStages << "\n";
       return 0;
@@ -211,12 +218,17 @@ int run(int argc, char** argv) {
     so::DrawingConfig config = so::DrawingConfig::mapperDefaults();
     config.resolution_m = resolution;
     config.threads = threads;
+    for (const auto& [name, value] : model_values)
+      if (!so::setNumberParameter(&config.sensor_model, name, value))
+        throw so::tools::UsageError("--model: unknown name '" + name + "'");
+    std::string why;
+    if (!config.isValid(&why)) throw so::tools::UsageError("--model: " + why);
     so::DisparityDrawer drawer(camera, config);
     so::LocalGrid grid;
     const Timing t = timeIt(repeat, [&] { drawer.prepareGrid(T_W_C, &grid); },
                             [&] { drawer.drawInto(image, T_W_C, &grid); });
     std::ostringstream what;
-    what << "pyramids + drawing + the sky guard, " << so::toString(config.algorithm) << " with the surface profile";
+    what << "pyramids + drawing + the gap and sky guards, " << so::toString(config.algorithm) << " with the surface profile";
     if (line_pyramid_ms > 0.0) what << "; " << std::setprecision(3) << t.median() / line_pyramid_ms << "x line_pyramid";
     row("default", t, what.str());
   }
