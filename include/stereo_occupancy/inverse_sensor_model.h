@@ -68,8 +68,11 @@ struct InverseSensorModelConfig {
   /// of a cell the same image measured as occupied; farther from every
   /// measured cell it is free space (p_free). A noise hit in front of a
   /// surface lies in the gaps of later views of that surface and was never
-  /// cleared (docs/quality.md). 0: off, the whole gap says nothing.
-  int gap_guard_cells = 1;
+  /// cleared (docs/quality.md). 0 (default): off, the whole gap says
+  /// nothing. Not yet safe with kLinePyramidBounded, whose bound lets a
+  /// block's far line cover a nearer obstacle with its gap: the guard
+  /// frees it (docs/quality.md).
+  int gap_guard_cells = 0;
 
   /// The parameters (parameter_table.h): f(spec, member) for each.
   template <typename Self, typename F>

@@ -108,9 +108,8 @@ size_t LocalGrid::guardSlabs(const Guard& guard, int z_begin, int z_end) {
           float& cell = data_[linearIndex(h, j, k)];
           const bool sky = cell == guard.sky_value, gap = cell == guard.gap_value;
           if (!sky && !gap) continue;
-          if (by_distance &&
-              std::max({std::abs(h - x), std::abs(j - y), std::abs(k - z)}) > (sky ? guard.sky_radius : guard.gap_radius))
-            continue;
+          const int reach = sky ? guard.sky_radius : guard.gap_radius;
+          if (by_distance && std::max({std::abs(h - x), std::abs(j - y), std::abs(k - z)}) > reach) continue;
           cell = sky ? sky_to : kKeepMark;
           ++marked;
         }

@@ -160,7 +160,7 @@ int run(int argc, char** argv) {
                    "map, on every frame of a simulated flight, with their mean, median, p99 and maximum; "
                    "--pace-ms MS sleeps MS before each frame, as between a camera's images.\n"
                    "--threads N: draw, blur and fuse on N threads (default 1).\n"
-                   "--model NAME=VALUE: a sensor model parameter of the default stage (e.g. gap_guard_cells=0), "
+                   "--model NAME=VALUE: a sensor model parameter of the default stage (e.g. gap_guard_cells=1), "
                    "repeatable.\n"
                    "STAGE: "
                 << kStages << "\n";
@@ -228,7 +228,8 @@ int run(int argc, char** argv) {
     const Timing t = timeIt(repeat, [&] { drawer.prepareGrid(T_W_C, &grid); },
                             [&] { drawer.drawInto(image, T_W_C, &grid); });
     std::ostringstream what;
-    what << "pyramids + drawing + the gap and sky guards, " << so::toString(config.algorithm) << " with the surface profile";
+    what << "pyramids + drawing + the surface guards, " << so::toString(config.algorithm)
+         << " with the surface profile";
     if (line_pyramid_ms > 0.0) what << "; " << std::setprecision(3) << t.median() / line_pyramid_ms << "x line_pyramid";
     row("default", t, what.str());
   }

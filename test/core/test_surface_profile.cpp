@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <vector>
@@ -295,6 +296,41 @@ TEST(SurfaceProfile, GapGuardFreesTheGapAwayFromHits) {
   EXPECT_EQ(columns, 64);
 }
 
+// Why the gap guard is off by default: a 0.2 m post 0.3-0.6 m in front of a
+// wall at 20 m lies in the gap of the wall's line, over which the bounded
+// pyramid's bound lets one line cover the block. Without the guard the post
+// is never called free (no information); with it, the gap farther than a
+// cell from the wall's hit is freed, and the post with it. Per-pixel
+// drawing hits the post either way.
+TEST(SurfaceProfile, BoundedPyramidKeepsAPostBeforeAWall) {
+  for (double gap_m : {0.3, 0.45, 0.6}) {
+    SCOPED_TRACE(gap_m);
+    SyntheticScene scene;
+    scene.addBox({20.1, -20.0, -5.0}, {22.0, 20.0, 10.0});
+    scene.addBox({19.9 - gap_m, -0.1, 0.0}, {20.1 - gap_m, 0.1, 4.0});
+    const cv::Mat disparity = renderDisparity(scene, StereoCameraModel(StereoCameraConfig()), camera());
+    auto postCells = [&](DrawingAlgorithm algorithm, int gap_guard_cells) {
+      DrawingConfig config = surfaceDrawing(algorithm);
+      config.sensor_model.gap_guard_cells = gap_guard_cells;
+      DisparityDrawer drawer(StereoCameraConfig(), config);
+      LocalGrid grid;
+      drawer.draw(disparity, camera(), &grid);
+      std::array<int, 3> free_zero_occupied{0, 0, 0};
+      for (double x = 19.91 - gap_m; x < 20.1 - gap_m; x += 0.05)
+        for (double z = 0.05; z < 4.0; z += 0.05) {
+          const float v = valueAt(grid, {x, 0.0, z});
+          ++free_zero_occupied[v < 0.0f ? 0 : (v == 0.0f ? 1 : 2)];
+        }
+      return free_zero_occupied;
+    };
+    const std::array<int, 3> all_unknown{0, 320, 0}, all_occupied{0, 0, 320};
+    EXPECT_EQ(postCells(DrawingAlgorithm::kLinePyramidBounded, InverseSensorModelConfig().gap_guard_cells),
+              all_unknown);
+    EXPECT_GT(postCells(DrawingAlgorithm::kLinePyramidBounded, 1)[0], 200);  // the guard's hole
+    EXPECT_EQ(postCells(DrawingAlgorithm::kLine, 1), all_occupied);
+  }
+}
+
 // The guard's pass itself: only zeros, only farther than the radius from
 // every occupied cell; nothing at radius 0; the same on a pool's workers.
 TEST(SurfaceProfile, FreeZerosAwayFromOccupiedKeepsZerosNearHits) {
@@ -335,8 +371,9 @@ TEST(SurfaceProfile, FreeZerosAwayFromOccupiedKeepsZerosNearHits) {
 TEST(SurfaceProfile, BothGuardsAtOnceAreTheGapGuardThenTheSkyGuard) {
   const float free = -0.85f, sky = std::nextafter(free, -1.0f);
   LocalGrid drawn;
-  drawn.reset({0, 0, 0}, {72, 64, 64}, kCell);
-  // Hits, and around them zeros, sky and free cells at Chebyshev distances 1-3.
+  drawn.reset({0, 0, 0}, {73, 63, 65}, kCell);  // not a whole number of 16-cell blocks
+  // Hits, and around them zeros, sky and free cells at Chebyshev distances
+  // 1-3, also in other slabs of z (the pool's chunks are slabs).
   const float values[] = {0.0f, sky, free, 0.0f, sky};
   int n = 0;
   for (int z = 4; z < 60; z += 9)
@@ -346,9 +383,10 @@ TEST(SurfaceProfile, BothGuardsAtOnceAreTheGapGuardThenTheSkyGuard) {
         for (int d = 1; d <= 3; ++d) {
           drawn.at(x + d, y, z) = values[n++ % 5];
           drawn.at(x - d, y + (d > 1), z) = values[n++ % 5];
+          drawn.at(x, y - 1, z + d) = values[n++ % 5];
         }
       }
-  drawn.at(70, 62, 62) = 0.0f;  // far from every hit
+  drawn.at(72, 62, 64) = 0.0f;  // far from every hit, in the grid's last cell
   for (int sky_radius : {0, 1, 2})
     for (int gap_radius : {0, 1, 2}) {
       LocalGrid expected = drawn;
@@ -361,9 +399,10 @@ TEST(SurfaceProfile, BothGuardsAtOnceAreTheGapGuardThenTheSkyGuard) {
             << sky_radius << gap_radius << threads;
         EXPECT_EQ(std::memcmp(both.data(), expected.data(), expected.numCells() * sizeof(float)), 0)
             << sky_radius << " " << gap_radius << " " << threads;
+        EXPECT_EQ(both.at(72, 62, 64), gap_radius > 0 ? free : 0.0f);  // the last, partial block too
       }
     }
   LocalGrid one_guard = drawn;
-  EXPECT_GT(one_guard.applySurfaceGuards(sky, 1, free, 1), 100u);  // the test sees both guards work
-  EXPECT_GT(drawn.silenceNearOccupied(sky, 1), 100u);
+  EXPECT_GT(one_guard.applySurfaceGuards(sky, 1, free, 1), 100u);  // zeros freed
+  EXPECT_GT(drawn.silenceNearOccupied(sky, 1), 100u);                // and sky silenced: both guards act here
 }
