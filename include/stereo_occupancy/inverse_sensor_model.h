@@ -20,9 +20,10 @@ enum class SensorProfile {
   /// p_min in front and falling to 0.5 behind (occupied from about 1.6 Δl in
   /// front of l_p to tail_sigmas·Δl behind it).
   kGaussian,
-  /// Occupied only where the cell's window holds l_p (p_hit), no information
-  /// in a gap of free_gap_sigmas·Δl in front of it (where the surface may
-  /// truly be, given the range noise), free (p_free) before the gap, nothing
+  /// Occupied (p_hit) only in the cell that holds the measured point (line
+  /// drawing) or whose window holds l_p (ray tracing), no information in a
+  /// gap of free_gap_sigmas·Δl in front of it (where the surface may truly
+  /// be, given the range noise), free (p_free) before the gap, nothing
   /// behind: a hit makes no slab of phantom obstacles around the surface.
   kSurface,
 };
@@ -48,7 +49,7 @@ struct InverseSensorModelConfig {
   /// measurement's own cell (nothing behind a surface is ever seen).
   double tail_sigmas = 3.0;
   /// kSurface: occupancy probability of the cell that holds the measurement.
-  double p_hit = 0.6;
+  double p_hit = 0.68;
   /// kSurface: occupancy probability of the free space before the gap.
   double p_free = 0.3;
   /// kSurface: occupancy probability along a ray that measured no range (zero
@@ -161,12 +162,26 @@ struct RangeProfile {
   float row_origin_m = 0.0f;  ///< offset e (window removed) of a row's first sample
   float tail_m = 0.0f;        ///< offsets above this carry no information (not drawn)
   float free_log_odds = 0.0f;
+  /// kSurface: log-odds of p_hit, the measurement's own cell; 0 for kGaussian,
+  /// whose peak is in the table. The table's rows hold no hit for kSurface:
+  /// at() adds it in the cell's window, a line drawing draws it into the cell
+  /// that holds the measured point (LineDrawer).
+  float hit_log_odds = 0.0f;
 
   /// Range up to which a line must be drawn [m].
   float endRange() const { return l_p_m + tail_m; }
 
+  /// True if the measurement's hit is drawn apart from the table (kSurface).
+  bool hasPointHit() const { return hit_log_odds > 0.0f; }
+
   /// L̂ at range l [m]; requires l - l_p <= tail_m.
   float at(float l_m) const {
+    if (hasPointHit() && std::abs(l_m - l_p_m) <= half_cell_m) return hit_log_odds;  // the window holds l_p
+    return tableAt(l_m);
+  }
+
+  /// at() without a kSurface hit: the table alone.
+  float tableAt(float l_m) const {
     const float u = l_m - l_p_m;
     if (!(u >= front_m)) return free_log_odds;  // also for l_p = inf
     // Eq. 11: the cell-wide window around l reaches to the point nearest l_p.
@@ -238,6 +253,7 @@ class LogOddsTable {
   float rows_per_peak_;   ///< (kPeakRows - 1) / (p_max - 0.5)
   int row_length_;
   float free_log_odds_;
+  float hit_log_odds_;  ///< RangeProfile::hit_log_odds
   float sky_log_odds_;  ///< of freeProfile(): a ray that measured no range
   std::vector<float> values_;
 };

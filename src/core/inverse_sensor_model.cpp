@@ -83,6 +83,8 @@ LogOddsTable::LogOddsTable(const InverseSensorModel& model, double cell_size_m)
   const int samples = static_cast<int>((kFrontSigmas + kTailSigmas) * kSamplesPerSigma);
   row_length_ = samples + 2;  // one sample of padding for the interpolation at the tail
   free_log_odds_ = static_cast<float>(model.freeLogOdds());
+  hit_log_odds_ = cfg.profile == SensorProfile::kSurface ? static_cast<float>(std::log(cfg.p_hit / (1.0 - cfg.p_hit)))
+                                                         : 0.0f;
   sky_log_odds_ = cfg.profile == SensorProfile::kSurface
                       ? std::nextafter(static_cast<float>(std::log(cfg.p_sky / (1.0 - cfg.p_sky))),
                                        -std::numeric_limits<float>::infinity())
@@ -94,9 +96,8 @@ LogOddsTable::LogOddsTable(const InverseSensorModel& model, double cell_size_m)
     float* row = &values_[static_cast<size_t>(r) * row_length_];
     for (int j = 0; j < row_length_; ++j) {
       const double t = -kFrontSigmas + static_cast<double>(j) / kSamplesPerSigma;  // e / Δl
-      if (cfg.profile == SensorProfile::kSurface) {
-        const int peak_sample = static_cast<int>(kFrontSigmas) * kSamplesPerSigma;
-        const double p = j == peak_sample ? cfg.p_hit : (t < -cfg.free_gap_sigmas ? cfg.p_free : 0.5);
+      if (cfg.profile == SensorProfile::kSurface) {  // the hit is RangeProfile::hit_log_odds
+        const double p = t < -cfg.free_gap_sigmas ? cfg.p_free : 0.5;
         row[j] = static_cast<float>(std::log(p / (1.0 - p)));
         continue;
       }
@@ -129,6 +130,7 @@ RangeProfile LogOddsTable::profile(float l_p_m, float delta_l_m) const {
   p.row_origin_m = -kFrontSigmas * delta_l_m;
   p.tail_m = tailOf(delta_l_m);
   p.free_log_odds = free_log_odds_;
+  p.hit_log_odds = hit_log_odds_;
   return p;
 }
 
@@ -136,6 +138,7 @@ RangeProfile LogOddsTable::freeProfile() const {
   RangeProfile p = profile(std::numeric_limits<float>::infinity(), 1.0f);
   p.tail_m = 0.0f;
   p.free_log_odds = sky_log_odds_;
+  p.hit_log_odds = 0.0f;  // no range, no hit
   return p;
 }
 

@@ -76,9 +76,9 @@ TEST(SurfaceProfile, ExactModelAndTableAgree) {
   const InverseSensorModel model(surfaceConfig());
   const LogOddsTable table(model, kCell);
   const double l_p = 15.0, dl = 0.6;
-  EXPECT_NEAR(model.logOddsHat(l_p, l_p, dl, kCell), logit(0.6), 1e-12);
-  EXPECT_NEAR(model.logOddsHat(l_p - 0.12, l_p, dl, kCell), logit(0.6), 1e-12);   // the window holds l_p
-  EXPECT_NEAR(model.logOddsHat(l_p + 0.12, l_p, dl, kCell), logit(0.6), 1e-12);
+  EXPECT_NEAR(model.logOddsHat(l_p, l_p, dl, kCell), logit(0.68), 1e-12);
+  EXPECT_NEAR(model.logOddsHat(l_p - 0.12, l_p, dl, kCell), logit(0.68), 1e-12);   // the window holds l_p
+  EXPECT_NEAR(model.logOddsHat(l_p + 0.12, l_p, dl, kCell), logit(0.68), 1e-12);
   EXPECT_EQ(model.logOddsHat(l_p - 0.125 - 0.3, l_p, dl, kCell), 0.0);             // in the gap (0.6 m)
   EXPECT_NEAR(model.logOddsHat(l_p - 0.125 - 0.61, l_p, dl, kCell), logit(0.3), 1e-12);  // before it
   EXPECT_EQ(model.logOddsHat(l_p + 0.2, l_p, dl, kCell), 0.0);                     // behind: nothing
@@ -149,6 +149,47 @@ TEST(SurfaceProfile, NothingBehindTheSurfaceAndNoSlabBeforeIt) {
   EXPECT_GT(paper_behind, 100);  // the tail of eq. 9 reaches 3 Δl (1 m at 12 m) into the wall
   EXPECT_EQ(surface_front, 0);
   EXPECT_EQ(at_wall, wall_cells);
+}
+
+// A wall seen by a camera yawed 45 degrees to the grid's axes: every pixel's hit lands in
+// the cell that holds its measured point, and no other cell is occupied.
+// A line's walk takes one cell per slab of its major axis (about 1.4 cells
+// of range here); a cell-wide window around the slab's centre left about a
+// quarter of the pixels without a hit, and put others in the wrong cell.
+TEST(SurfaceProfile, EachHitLandsInItsPointsCell) {
+  SyntheticScene scene;
+  scene.addBox({14.0, -40.0, -5.0}, {16.0, 40.0, 10.0});
+  const StereoCameraModel cam{StereoCameraConfig()};
+  const Eigen::Isometry3d T_W_C = lookingAlongX(Eigen::Vector3d(0.0, 0.0, 2.0), M_PI / 4.0);
+  const cv::Mat disparity = renderDisparity(scene, cam, T_W_C);
+  DisparityDrawer drawer(StereoCameraConfig(), surfaceDrawing(DrawingAlgorithm::kLine));
+  LocalGrid grid;
+  drawer.draw(disparity, T_W_C, &grid);
+  std::vector<char> point_cell(grid.numCells(), 0);
+  int pixels = 0, hit = 0;
+  for (int y = 0; y < disparity.rows; ++y)
+    for (int x = 0; x < disparity.cols; ++x) {
+      const float d = disparity.at<float>(y, x);
+      if (!cam.isValidDisparity(d) || !measuresRange(cam, d)) continue;
+      const Eigen::Vector3d C_point = cam.rayThroughPixel(x, y) * cam.depthFromDisparity(d);
+      if (C_point.norm() > cam.config().max_range_m) continue;
+      const Eigen::Vector3i local = LocalGrid::globalIndex(T_W_C * C_point, kCell) - grid.originIndex();
+      ASSERT_TRUE(grid.contains(local));
+      ++pixels;
+      hit += grid.at(local.x(), local.y(), local.z()) > 0.0f;
+      point_cell[grid.linearIndex(local.x(), local.y(), local.z())] = 1;
+    }
+  // A point on a cell's face may round to either cell (the drawing's ranges
+  // are floats): a few in 10^5.
+  ASSERT_GT(pixels, 50000);
+  EXPECT_GE(hit, pixels - pixels / 10000);
+  size_t occupied = 0, occupied_elsewhere = 0;
+  for (size_t i = 0; i < grid.numCells(); ++i) {
+    occupied += grid.data()[i] > 0.0f;
+    occupied_elsewhere += grid.data()[i] > 0.0f && !point_cell[i];
+  }
+  ASSERT_GT(occupied, 1000u);
+  EXPECT_LE(occupied_elsewhere, occupied / 100);
 }
 
 // The thin obstacles of the bounded-pyramid tests: with the surface profile
@@ -301,7 +342,7 @@ TEST(SurfaceProfile, GapGuardFreesTheGapAwayFromHits) {
 // pyramid's bound lets one line cover the block. Without the guard the post
 // is never called free (no information); with it, the gap farther than a
 // cell from the wall's hit is freed, and the post with it. Per-pixel
-// drawing hits the post either way.
+// drawing hits the post's face either way and calls none of it free.
 TEST(SurfaceProfile, BoundedPyramidKeepsAPostBeforeAWall) {
   for (double gap_m : {0.3, 0.45, 0.6}) {
     SCOPED_TRACE(gap_m);
@@ -323,11 +364,14 @@ TEST(SurfaceProfile, BoundedPyramidKeepsAPostBeforeAWall) {
         }
       return free_zero_occupied;
     };
-    const std::array<int, 3> all_unknown{0, 320, 0}, all_occupied{0, 0, 320};
+    const std::array<int, 3> all_unknown{0, 320, 0};
     EXPECT_EQ(postCells(DrawingAlgorithm::kLinePyramidBounded, InverseSensorModelConfig().gap_guard_cells),
               all_unknown);
     EXPECT_GT(postCells(DrawingAlgorithm::kLinePyramidBounded, 1)[0], 200);  // the guard's hole
-    EXPECT_EQ(postCells(DrawingAlgorithm::kLine, 1), all_occupied);
+    // The post's face is hit; behind it, inside the post, a hit says nothing.
+    const std::array<int, 3> line = postCells(DrawingAlgorithm::kLine, 1);
+    EXPECT_EQ(line[0], 0);
+    EXPECT_GE(line[2], 80);  // at least the cell of the face: one column of sample points
   }
 }
 

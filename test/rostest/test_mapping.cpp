@@ -317,7 +317,7 @@ TEST_F(MappingTest, DepthInputReconfigureAndInvalidParameters) {
   // is 0.5 + k / (Δl √(2π)) (eq. 9), with k halved.
   const double dl = 144.0 * 0.5 / 210.0;
   auto logit = [](double p) { return std::log(p / (1.0 - p)); };
-  EXPECT_NEAR(maxLogOdds(*from_disparity), logit(0.6), 0.01);
+  EXPECT_NEAR(maxLogOdds(*from_disparity), logit(0.68), 0.01);
   auto drawWith = [&](dynamic_reconfigure::Reconfigure srv, const ros::Time& stamp) {
     EXPECT_TRUE(ros::service::call("/disparity_mapper/set_parameters", srv));
     sendFrame(stamp);
