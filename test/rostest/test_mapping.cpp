@@ -260,7 +260,10 @@ TEST_F(MappingTest, DepthInputReconfigureAndInvalidParameters) {
   // A wall filling the whole view: a depth camera reports no "infinitely far"
   // (depth 0 means no measurement), so both inputs carry the same information.
   SyntheticScene big_wall;
-  big_wall.addBox(Eigen::Vector3d(12.0, -30.0, -30.0), Eigen::Vector3d(13.0, 30.0, 30.0));
+  // Its face off the cells' faces (12.0 m is one): a hit goes into the cell
+  // that holds its point, and a point on a face falls in either cell by the
+  // last bit of z = bf / d.
+  big_wall.addBox(Eigen::Vector3d(12.1, -30.0, -30.0), Eigen::Vector3d(13.0, 30.0, 30.0));
   const cv::Mat wall_image = renderDisparity(big_wall, StereoCameraModel(StereoCameraConfig()), T_W_C_);
   const ros::Time stamp = ros::Time::now();
   sendFrame(stamp, "camera_optical", true, &wall_image);
