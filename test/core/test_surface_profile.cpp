@@ -151,8 +151,9 @@ TEST(SurfaceProfile, NothingBehindTheSurfaceAndNoSlabBeforeIt) {
   EXPECT_EQ(at_wall, wall_cells);
 }
 
-// A wall seen by a camera yawed 45 degrees to the grid's axes: every pixel's hit lands in
-// the cell that holds its measured point, and no other cell is occupied.
+// A wall seen by a camera yawed 45 degrees to the grid's axes: every
+// pixel's hit lands in the cell that holds its measured point, and next to
+// no other cell is occupied (points on a cell's face aside).
 // A line's walk takes one cell per slab of its major axis (about 1.4 cells
 // of range here); a cell-wide window around the slab's centre left about a
 // quarter of the pixels without a hit, and put others in the wrong cell.
