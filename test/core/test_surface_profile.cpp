@@ -154,9 +154,10 @@ TEST(SurfaceProfile, NothingBehindTheSurfaceAndNoSlabBeforeIt) {
 // A wall seen by a camera yawed 45 degrees to the grid's axes: every
 // pixel's hit lands in the cell that holds its measured point, and next to
 // no other cell is occupied (points on a cell's face aside).
-// A line's walk takes one cell per slab of its major axis (about 1.4 cells
-// of range here); a cell-wide window around the slab's centre left about a
-// quarter of the pixels without a hit, and put others in the wrong cell.
+// A line's walk takes one cell per slab of its major axis (up to 1.4 cells
+// of range here); a cell-wide window around the slab's centre misses the
+// point in 1 - |d_major| of a slab's range, and its cell is not always the
+// point's.
 TEST(SurfaceProfile, EachHitLandsInItsPointsCell) {
   SyntheticScene scene;
   scene.addBox({14.0, -40.0, -5.0}, {16.0, 40.0, 10.0});
