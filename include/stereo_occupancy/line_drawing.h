@@ -158,7 +158,7 @@ class LineDrawer {
   template <typename DescendFrom>
   void drawPyramidParts(const Descent& s, LocalGrid* grid, DrawStatistics* stats, const DescendFrom& descend_from);
   /// Each used worker grid into @p grid by max, and back to kUnknown.
-  void mergeWorkerGrids(const std::vector<char>& used, LocalGrid* grid);
+  void mergeWorkerGrids(const std::vector<PerWorker<char>>& used, LocalGrid* grid);
   void descendBounded(const Descent& s, int level, int x, int y, double z_begin) const;
 
   const StereoCameraModel& camera_;

@@ -15,6 +15,17 @@
 
 namespace stereo_occupancy {
 
+/// Bytes of a cache line on the targets (x86-64, aarch64).
+constexpr size_t kCacheLineBytes = 64;
+
+/// A value one worker writes, alone on its cache line: workers writing
+/// neighbouring values (counters bumped once a line drawn) would pass the
+/// line back and forth between their cores on every write.
+template <typename T>
+struct alignas(kCacheLineBytes) PerWorker {
+  T value{};
+};
+
 /// A fixed set of threads that run the parts of one job at a time. The
 /// caller's thread is worker 0, so a pool of one starts no thread. Not for
 /// jobs from several threads at once (one pool per drawer).

@@ -404,20 +404,20 @@ void LineDrawer::drawParts(size_t parts, const RayGrid& g, LocalGrid* grid, Draw
     releaseIfOversized(&worker_grids_[w - 1], grid->numCells());  // after one rare huge grid
     worker_grids_[w - 1].resize(grid->numCells(), LocalGrid::kUnknown);
   }
-  std::vector<DrawStatistics> worker_stats(workers);
-  std::vector<char> used(workers, 0);  // char, not bool: each worker writes its own element
+  std::vector<PerWorker<DrawStatistics>> worker_stats(workers);
+  std::vector<PerWorker<char>> used(workers);
   try {
     pool_->run(parts, [&](size_t part, unsigned w) {
       RayGrid mine = g;
       if (w > 0) mine.data = worker_grids_[w - 1].data();
-      used[w] = 1;
-      draw_part(part, mine, &worker_stats[w]);
+      used[w].value = 1;
+      draw_part(part, mine, &worker_stats[w].value);
     });
   } catch (...) {
     mergeWorkerGrids(used, grid);  // the worker grids are unknown again for the next image
     throw;
   }
-  for (const DrawStatistics& s : worker_stats) addTo(s, stats);
+  for (const PerWorker<DrawStatistics>& s : worker_stats) addTo(s.value, stats);
   mergeWorkerGrids(used, grid);
 }
 
@@ -455,13 +455,13 @@ void LineDrawer::drawPyramidParts(const Descent& s, LocalGrid* grid, DrawStatist
   });
 }
 
-void LineDrawer::mergeWorkerGrids(const std::vector<char>& used, LocalGrid* grid) {
+void LineDrawer::mergeWorkerGrids(const std::vector<PerWorker<char>>& used, LocalGrid* grid) {
   constexpr size_t kBlock = kInformationBlock;
   float* cells = grid->data();
   const size_t n = grid->numCells();
   pool_->runInChunks(n, kMergeChunkCells, [&](size_t begin, size_t end) {
     for (size_t w = 1; w < used.size(); ++w) {
-      if (!used[w]) continue;
+      if (!used[w].value) continue;
       float* other = worker_grids_[w - 1].data();
       for (size_t i = begin; i < end; i += kBlock) {
         const size_t block_end = std::min(end, i + kBlock);
