@@ -101,18 +101,25 @@ size_t LocalGrid::guardSlabs(const Guard& guard, int z_begin, int z_end) {
   // different radii need the distance.
   const bool by_distance = guard.sky_radius > 0 && guard.gap_radius > 0 && guard.sky_radius != guard.gap_radius;
   size_t marked = 0;
-  auto markAround = [&](int x, int y, int z) {
+  // The cells within reach of a run [x0, x1] of occupied cells in row (y,
+  // z): the union of its cells' neighbourhoods, a row of the box at a time
+  // (marking is idempotent, so the union is what cell by cell would mark).
+  auto markAroundRun = [&](int x0, int x1, int y, int z) {
+    const int h_begin = std::max(0, x0 - radius), h_end = std::min(size_.x() - 1, x1 + radius);
     for (int k = std::max(0, z - radius); k <= std::min(size_.z() - 1, z + radius); ++k)
-      for (int j = std::max(0, y - radius); j <= std::min(size_.y() - 1, y + radius); ++j)
-        for (int h = std::max(0, x - radius); h <= std::min(size_.x() - 1, x + radius); ++h) {
-          float& cell = data_[linearIndex(h, j, k)];
+      for (int j = std::max(0, y - radius); j <= std::min(size_.y() - 1, y + radius); ++j) {
+        float* row = &data_[linearIndex(0, j, k)];
+        const int dist_jk = std::max(std::abs(j - y), std::abs(k - z));
+        for (int h = h_begin; h <= h_end; ++h) {
+          float& cell = row[h];
           const bool sky = cell == guard.sky_value, gap = cell == guard.gap_value;
           if (!sky && !gap) continue;
           const int reach = sky ? guard.sky_radius : guard.gap_radius;
-          if (by_distance && std::max({std::abs(h - x), std::abs(j - y), std::abs(k - z)}) > reach) continue;
+          if (by_distance && std::max({x0 - h, h - x1, dist_jk}) > reach) continue;  // Chebyshev to the run
           cell = sky ? sky_to : kKeepMark;
           ++marked;
         }
+      }
   };
   for (int z = z_begin; z < z_end; ++z)
     for (int y = 0; y < size_.y(); ++y) {
@@ -122,7 +129,10 @@ size_t LocalGrid::guardSlabs(const Guard& guard, int z_begin, int z_end) {
           x += kInformationBlock - 1;  // nothing occupied in these 16 cells
           continue;
         }
-        if (row[x] > 0.0f) markAround(x, y, z);
+        if (!(row[x] > 0.0f)) continue;
+        const int x0 = x;
+        while (x + 1 < size_.x() && row[x + 1] > 0.0f) ++x;  // marks are never > 0: the run stays
+        markAroundRun(x0, x, y, z);
       }
     }
   return marked;
