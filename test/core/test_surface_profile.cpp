@@ -5,9 +5,13 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <random>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "stereo_occupancy/disparity_drawer.h"
@@ -451,4 +455,57 @@ TEST(SurfaceProfile, BothGuardsAtOnceAreTheGapGuardThenTheSkyGuard) {
   LocalGrid one_guard = drawn;
   EXPECT_GT(one_guard.applySurfaceGuards(sky, 1, free, 1), 100u);  // zeros freed
   EXPECT_GT(drawn.silenceNearOccupied(sky, 1), 100u);                // and sky silenced: both guards act here
+}
+
+// Both guards against a plain reference on random grids with runs of
+// adjacent hits in a row (the guard visits a run's neighbourhood once):
+// sky within sky_radius of a hit becomes 0, a zero within gap_radius of a
+// hit stays 0, every other zero becomes free; radii that differ too.
+TEST(SurfaceProfile, BothGuardsMatchAPlainReferenceAroundRunsOfHits) {
+  const float free = -0.85f, sky = std::nextafter(free, -1.0f), hit = 0.9f;
+  const float kinds[] = {LocalGrid::kUnknown, sky, sky, free, 0.0f, 0.0f};
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int> kind(0, 5), run_length(1, 5);
+  std::bernoulli_distribution starts_run(0.04);
+  LocalGrid drawn;
+  drawn.reset({0, 0, 0}, {37, 6, 9}, kCell);
+  const Eigen::Vector3i n = drawn.size();
+  for (size_t i = 0; i < drawn.numCells(); ++i) drawn.data()[i] = kinds[kind(rng)];
+  for (int z = 0; z < n.z(); ++z)
+    for (int y = 0; y < n.y(); ++y)
+      for (int x = 0; x < n.x(); ++x)
+        if (starts_run(rng))
+          for (int end = std::min(n.x(), x + run_length(rng)); x < end; ++x) drawn.at(x, y, z) = hit;
+  auto nearestHit = [&](int x, int y, int z) {  // Chebyshev distance to the nearest hit
+    int best = 1 << 20;
+    for (int k = 0; k < n.z(); ++k)
+      for (int j = 0; j < n.y(); ++j)
+        for (int h = 0; h < n.x(); ++h)
+          if (drawn.at(h, j, k) == hit)
+            best = std::min(best, std::max({std::abs(h - x), std::abs(j - y), std::abs(k - z)}));
+    return best;
+  };
+  for (const auto& [sky_radius, gap_radius] : {std::pair{1, 2}, std::pair{2, 1}, std::pair{1, 1}, std::pair{2, 2}}) {
+    LocalGrid expected = drawn;
+    size_t freed = 0;
+    for (int z = 0; z < n.z(); ++z)
+      for (int y = 0; y < n.y(); ++y)
+        for (int x = 0; x < n.x(); ++x) {
+          float& cell = expected.at(x, y, z);
+          if (cell == sky && nearestHit(x, y, z) <= sky_radius) cell = 0.0f;
+          if (drawn.at(x, y, z) == 0.0f && nearestHit(x, y, z) > gap_radius) {
+            cell = free;
+            ++freed;
+          }
+        }
+    ASSERT_GT(freed, 0u);
+    for (unsigned threads : {1u, 2u}) {
+      WorkerPool pool(threads);
+      LocalGrid both = drawn;
+      const std::string what = "sky " + std::to_string(sky_radius) + " gap " + std::to_string(gap_radius) +
+                               " threads " + std::to_string(threads);
+      EXPECT_EQ(both.applySurfaceGuards(sky, sky_radius, free, gap_radius, &pool), freed) << what;
+      EXPECT_EQ(std::memcmp(both.data(), expected.data(), expected.numCells() * sizeof(float)), 0) << what;
+    }
+  }
 }
