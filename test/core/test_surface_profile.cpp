@@ -476,15 +476,18 @@ TEST(SurfaceProfile, BothGuardsMatchAPlainReferenceAroundRunsOfHits) {
       for (int x = 0; x < n.x(); ++x)
         if (starts_run(rng))
           for (int end = std::min(n.x(), x + run_length(rng)); x < end; ++x) drawn.at(x, y, z) = hit;
-  auto nearestHit = [&](int x, int y, int z) {  // Chebyshev distance to the nearest hit
-    int best = 1 << 20;
-    for (int k = 0; k < n.z(); ++k)
-      for (int j = 0; j < n.y(); ++j)
-        for (int h = 0; h < n.x(); ++h)
-          if (drawn.at(h, j, k) == hit)
-            best = std::min(best, std::max({std::abs(h - x), std::abs(j - y), std::abs(k - z)}));
-    return best;
-  };
+  std::vector<int> nearest(drawn.numCells(), 1 << 20);  // Chebyshev distance to the nearest hit
+  for (int z = 0; z < n.z(); ++z)
+    for (int y = 0; y < n.y(); ++y)
+      for (int x = 0; x < n.x(); ++x)
+        for (int k = 0; k < n.z(); ++k)
+          for (int j = 0; j < n.y(); ++j)
+            for (int h = 0; h < n.x(); ++h)
+              if (drawn.at(h, j, k) == hit) {
+                int& best = nearest[drawn.linearIndex(x, y, z)];
+                best = std::min(best, std::max({std::abs(h - x), std::abs(j - y), std::abs(k - z)}));
+              }
+  auto nearestHit = [&](int x, int y, int z) { return nearest[drawn.linearIndex(x, y, z)]; };
   for (const auto& [sky_radius, gap_radius] : {std::pair{1, 2}, std::pair{2, 1}, std::pair{1, 1}, std::pair{2, 2}}) {
     LocalGrid expected = drawn;
     size_t freed = 0;
