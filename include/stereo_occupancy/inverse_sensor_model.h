@@ -240,6 +240,8 @@ class LogOddsTable {
 
   double cellSize() const { return cell_size_m_; }
   float freeLogOdds() const { return free_log_odds_; }
+  /// RangeProfile::hit_log_odds of every measured profile: log-odds of p_hit for kSurface, else 0.
+  float hitLogOdds() const { return hit_log_odds_; }
   /// Log-odds along a ray that measured no range. For the surface profile one
   /// float step below p_sky's, so that a cell a measured ray also crosses
   /// holds that ray's value (the max) and silenceNearOccupied() can tell the two apart.

@@ -51,6 +51,10 @@ class LineDrawer {
   /// its share of the blocks into a grid of its own, and a cell keeps the
   /// largest value (obstacle priority does not depend on the order).
   void setWorkers(WorkerPool* pool) { pool_ = pool; }
+  /// With the surface profile, draws the bounded descent's spans (below) as
+  /// spans (true, the default) or descends into them (false: for tests and
+  /// benchmarks; the same occupied cells, more free ones, more lines).
+  void setSurfaceSpans(bool on) { surface_spans_ = on; }
   /// Grids of more cells are drawn on one thread (a worker's grid would cost too much memory).
   static constexpr size_t kMaxSharedGridCells = size_t{16} << 20;
   /// Cells the workers' own grids hold between images (they follow the
@@ -82,6 +86,15 @@ class LineDrawer {
   /// that descends draws the free stretch its children share once (along its
   /// centre ray, up to its nearest measurement's front and to the depth
   /// where its level's rays are one cell apart); its children start there.
+  ///
+  /// With the surface profile a block whose rays lie within one cell of each
+  /// other up to its farthest measurement (eq. 13) and whose depths leave no
+  /// hole wider than one measurement's gap (oblique ground: a span) is not
+  /// descended: one line along its centre ray draws the free space up to its
+  /// nearest measurement's gap, and each of the lines the descent would draw
+  /// gives only its hit, in the same cell. The occupied cells are the
+  /// descent's; the free space beyond the nearest gap, within one cell of
+  /// the surface, is left out (docs/performance.md, sixth step).
   void drawPyramidBounded(const DisparityPyramid& min_pyramid, const DisparityPyramid& max_pyramid,
                           const DisparityBlockBound& bound, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
                           DrawStatistics* stats);
@@ -160,11 +173,29 @@ class LineDrawer {
   /// Each used worker grid into @p grid by max, and back to kUnknown.
   void mergeWorkerGrids(const std::vector<PerWorker<char>>& used, LocalGrid* grid);
   void descendBounded(const Descent& s, int level, int x, int y, double z_begin) const;
+  /// The sub-blocks a bounded descent would draw one line each for (its leaves).
+  struct SpanLeaves {
+    static constexpr int kMaxLeaves = 64;  ///< more: the block is descended
+    int count = 0;
+    float lo[kMaxLeaves], hi[kMaxLeaves];  ///< a leaf's min and max disparity [px]
+    int level[kMaxLeaves], x[kMaxLeaves], y[kMaxLeaves];
+  };
+  /// Adds the leaves below a block; false if one is sky (its free line to the
+  /// range is needed) or there are more than kMaxLeaves.
+  bool gatherLeaves(const Descent& s, int level, int x, int y, SpanLeaves* out) const;
+  /// True if the block is a span: its leaves measure depths with no hole
+  /// wider than one measurement's gap (oblique ground, not a post before a wall).
+  bool isSpan(const Descent& s, int level, int x, int y, SpanLeaves* leaves) const;
+  /// A span: free space along its centre ray up to the nearest measurement's
+  /// gap, and each leaf's hit where the leaf's line would draw it.
+  void drawSpan(const Descent& s, int level, int x, int y, float d_max, const SpanLeaves& leaves,
+                double z_begin) const;
 
   const StereoCameraModel& camera_;
   const LogOddsTable& table_;
   const PyramidLevelTable& levels_;
   SimdLevel simd_;
+  bool surface_spans_ = true;
   WorkerPool* pool_ = nullptr;
   std::vector<std::vector<float>> worker_grids_;  ///< worker w >= 1 draws into [w - 1]; kUnknown between images
 };

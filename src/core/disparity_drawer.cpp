@@ -90,6 +90,7 @@ DisparityDrawer::DisparityDrawer(const StereoCameraConfig& camera, const Drawing
     line_drawer_.setWorkers(workers_.get());
     blur_.setWorkers(workers_.get());
   }
+  line_drawer_.setSurfaceSpans(config_.surface_spans);
   const bool draws_pyramid_lines = config_.algorithm == DrawingAlgorithm::kLinePyramid ||
                                    config_.algorithm == DrawingAlgorithm::kLinePyramidBounded;
   if (draws_pyramid_lines && levels_.minLevel() < PyramidLevelTable::kLowestLevel) {

@@ -571,6 +571,13 @@ void LineDrawer::descendBounded(const Descent& s, int level, int x, int y, doubl
     s.stats->grid_cells_drawn += drawPixel(s, level, x, y, d, z_begin);
     return;
   }
+  // Fine enough but not faithful: an oblique surface (the ground) whose
+  // depths leave no hole is drawn as one free line and its sub-blocks' hits.
+  SpanLeaves leaves;
+  if (fine_enough && surface_spans_ && table_.hitLogOdds() > 0.0f && isSpan(s, level, x, y, &leaves)) {
+    drawSpan(s, level, x, y, d_max, leaves, z_begin);
+    return;
+  }
   // The block's rays lie within one cell of each other up to the depth
   // z_i = c·f / 2^i (eq. 12) and are free up to the nearest measurement's
   // front: one ray through the block's centre draws that stretch for all of
@@ -593,6 +600,78 @@ void LineDrawer::descendBounded(const Descent& s, int level, int x, int y, doubl
   const int h = s.min_pyramid.height(level - 1);
   for (int cy = 2 * y; cy <= 2 * y + 1 && cy < h; ++cy)
     for (int cx = 2 * x; cx <= 2 * x + 1 && cx < w; ++cx) descendBounded(s, level - 1, cx, cy, z_begin);
+}
+
+bool LineDrawer::gatherLeaves(const Descent& s, int level, int x, int y, SpanLeaves* out) const {
+  const float lo = s.min_pyramid.at(level, x, y);
+  if (lo == DisparityPyramid::kInvalidMin) return true;  // no pixel, no line
+  const float hi = level > 0 ? s.max_pyramid->at(level, x, y) : lo;
+  if (level <= levels_.minLevel() || s.bound->isFaithful(lo, hi)) {  // where descendBounded() draws a line
+    if (!measuresRange(camera_, lo) || out->count == SpanLeaves::kMaxLeaves) return false;
+    const int i = out->count++;
+    out->lo[i] = lo;
+    out->hi[i] = hi;
+    out->level[i] = level;
+    out->x[i] = x;
+    out->y[i] = y;
+    return true;
+  }
+  const int w = s.min_pyramid.width(level - 1);
+  const int h = s.min_pyramid.height(level - 1);
+  for (int cy = 2 * y; cy <= 2 * y + 1 && cy < h; ++cy)
+    for (int cx = 2 * x; cx <= 2 * x + 1 && cx < w; ++cx)
+      if (!gatherLeaves(s, level - 1, cx, cy, out)) return false;
+  return true;
+}
+
+bool LineDrawer::isSpan(const Descent& s, int level, int x, int y, SpanLeaves* leaves) const {
+  if (!gatherLeaves(s, level, x, y, leaves) || leaves->count == 0) return false;
+  // Nearest first (insertion sort: a few dozen leaves); each next leaf must
+  // come within one measurement's gap of the depths before it.
+  int order[SpanLeaves::kMaxLeaves];
+  for (int i = 0; i < leaves->count; ++i) {
+    int j = i;
+    for (; j > 0 && leaves->hi[order[j - 1]] < leaves->hi[i]; --j) order[j] = order[j - 1];
+    order[j] = i;
+  }
+  float reached = leaves->lo[order[0]];
+  for (int i = 1; i < leaves->count; ++i) {
+    const int k = order[i];
+    if (leaves->hi[k] < reached && !s.bound->isFaithful(leaves->hi[k], reached)) return false;  // a hole
+    reached = std::min(reached, leaves->lo[k]);
+  }
+  return true;
+}
+
+void LineDrawer::drawSpan(const Descent& s, int level, int x, int y, float d_max, const SpanLeaves& leaves,
+                          double z_begin) const {
+  const auto& cfg = camera_.config();
+  constexpr double kToTheEnd = std::numeric_limits<double>::infinity();
+  // Free space along the block's centre ray up to the nearest measurement's
+  // gap; its hit is drawn with its leaf's, where its own line would put it.
+  // Up to the front of its profile with the sky value, as a descending
+  // block's shared stretch: the sky guard silences it beside a hit.
+  const Eigen::Vector3d C_ray = camera_.rayThroughPixel(DisparityPyramid::centreOf(level, x, cfg.width_px),
+                                                        DisparityPyramid::centreOf(level, y, cfg.height_px));
+  const double norm = C_ray.norm();
+  RangeProfile nearest = profileOf(s, norm, d_max);
+  nearest.hit_log_odds = 0.0f;
+  nearest.free_log_odds = s.free_profile.free_log_odds;
+  ++s.stats->coordinate_transfers;
+  s.stats->grid_cells_drawn += drawRay(s.grid, s.T_W_C.linear() * (C_ray / norm), nearest, z_begin * norm, kToTheEnd);
+  // Each leaf's hit: the cell drawRay() would give its line's point hit.
+  RangeProfile hit;
+  hit.hit_log_odds = table_.hitLogOdds();
+  for (int i = 0; i < leaves.count; ++i) {
+    const Eigen::Vector3d C_leaf =
+        camera_.rayThroughPixel(DisparityPyramid::centreOf(leaves.level[i], leaves.x[i], cfg.width_px),
+                                DisparityPyramid::centreOf(leaves.level[i], leaves.y[i], cfg.height_px));
+    const double leaf_norm = C_leaf.norm();
+    hit.l_p_m = measuredRange(camera_, leaf_norm, leaves.lo[i]).l_p_m;
+    ++s.stats->coordinate_transfers;
+    s.stats->grid_cells_drawn += drawPointHit(s.grid, s.T_W_C.linear() * (C_leaf / leaf_norm), hit, z_begin * leaf_norm,
+                                              s.grid.max_range_m);
+  }
 }
 
 void LineDrawer::drawPyramidBounded(const DisparityPyramid& min_pyramid, const DisparityPyramid& max_pyramid,

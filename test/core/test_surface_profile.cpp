@@ -512,3 +512,62 @@ TEST(SurfaceProfile, BothGuardsMatchAPlainReferenceAroundRunsOfHits) {
     }
   }
 }
+
+// Spans (LineDrawer::setSurfaceSpans()): a block of oblique ground is drawn
+// as one free line and its leaves' hits instead of a line per leaf. The
+// occupied cells are the descent's, cell for cell and value for value; the
+// cells written are fewer; a block with a hole in its depths (the post
+// before the wall) is still descended, so the free space beside the post
+// stays. The matcher's noise is what splits the ground's blocks.
+TEST(SurfaceProfile, SpansDrawTheDescentsOccupiedCellsWithFewerLines) {
+  SyntheticScene scene;
+  scene.addBox({-5.0, -40.0, -1.0}, {60.0, 40.0, 0.0});  // the ground
+  scene.addBox({20.1, -20.0, -5.0}, {22.0, 20.0, 10.0});  // a wall
+  scene.addBox({14.9, -0.1, 0.0}, {15.1, 0.1, 4.0});      // a post before it
+  for (const Eigen::Isometry3d& T_W_C :
+       {camera(), lookingAlongX({0.0, 0.0, 6.0}, 0.1, 0.25), lookingAlongX({2.0, 1.0, 10.0}, -0.2, 0.5)}) {
+    cv::Mat disparity = renderDisparity(scene, StereoCameraModel(StereoCameraConfig()), T_W_C);
+    std::mt19937 random(7);
+    std::normal_distribution<float> matcher_noise_px(0.0f, 0.2f);
+    for (int y = 0; y < disparity.rows; ++y)
+      for (float& d : cv::Mat_<float>(disparity.row(y)))
+        if (d > 0.0f) d = std::max(d + matcher_noise_px(random), 0.01f);
+    auto draw = [&](bool spans, LocalGrid* grid) {
+      DrawingConfig config = surfaceDrawing(DrawingAlgorithm::kLinePyramidBounded);
+      config.surface_spans = spans;
+      config.threads = 1;
+      DisparityDrawer drawer(StereoCameraConfig(), config);
+      return drawer.draw(disparity, T_W_C, grid);
+    };
+    LocalGrid with, without;
+    const DrawStatistics with_stats = draw(true, &with), without_stats = draw(false, &without);
+    ASSERT_EQ(with.originIndex(), without.originIndex());
+    ASSERT_EQ(with.size(), without.size());
+    int occupied = 0, occupied_differ = 0, free_with = 0, free_without = 0;
+    for (size_t i = 0; i < with.numCells(); ++i) {
+      const float a = with.data()[i], b = without.data()[i];
+      occupied += b > 0.0f;
+      occupied_differ += (a > 0.0f || b > 0.0f) && a != b;
+      free_with += a < 0.0f && a != LocalGrid::kUnknown;
+      free_without += b < 0.0f && b != LocalGrid::kUnknown;
+    }
+    EXPECT_GT(occupied, 1000);
+    EXPECT_EQ(occupied_differ, 0);
+    // A leaf's hit is a coordinate transfer too, but one cell instead of a line.
+    EXPECT_LT(with_stats.grid_cells_drawn, 0.7 * without_stats.grid_cells_drawn);
+    EXPECT_GT(free_with, 0.9 * free_without);  // what is left out lies within a cell of the surface
+    // Between the post and the wall, a metre and more above the ground.
+    auto freeBesideThePost = [&](const LocalGrid& grid) {
+      int free = 0;
+      for (double x = 15.6; x < 19.6; x += kCell)
+        for (double y = -1.5; y < 1.5; y += kCell)
+          for (double z = 1.1; z < 3.5; z += kCell) {
+            const float v = valueAt(grid, {x, y, z});
+            free += v < 0.0f && v != LocalGrid::kUnknown;
+          }
+      return free;
+    };
+    // Without the hole test the post's blocks would be spans: 10-16 % less.
+    EXPECT_GE(freeBesideThePost(with), 0.98 * freeBesideThePost(without));
+  }
+}
