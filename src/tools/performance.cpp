@@ -70,7 +70,7 @@ Timing timeIt(int repeats, const std::function<void()>& setup, const std::functi
 /// @p pace_ms > 0 the thread sleeps that long before each frame, as a mapper
 /// between its camera's images (a 10 Hz camera: 100 ms): what the caches and
 /// the CPU's idle states cost a frame that arrives after a pause.
-int flightPath(const std::string& scenario_name, long pace_ms, int threads) {
+int flightPath(const std::string& scenario_name, long pace_ms, int threads, bool spans) {
   const so::FlightScenario scenario = so::tools::scenarioNamed(scenario_name);
   std::vector<cv::Mat> images;
   for (size_t i = 0; i < scenario.T_W_B.size(); ++i) images.push_back(so::renderStereoFrame(scenario, i, 1));
@@ -88,6 +88,7 @@ int flightPath(const std::string& scenario_name, long pace_ms, int threads) {
     so::DrawingConfig config = mapper ? so::DrawingConfig::mapperDefaults() : so::DrawingConfig();
     config.algorithm = algorithm;
     config.threads = threads;
+    config.surface_spans = spans;
     so::DisparityDrawer drawer(scenario.camera, config);
     so::LocalGrid grid;
     so::GridUpdate update;
@@ -129,6 +130,7 @@ int run(int argc, char** argv) {
   std::string only, scenario_name, flight;
   long frame = 0, pace_ms = 0;
   int threads = 1;
+  bool spans = true;
   std::map<std::string, double> model_values;  // the default stage's sensor model, by name
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -146,13 +148,15 @@ int run(int argc, char** argv) {
       pace_ms = so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 0, 10000);
     } else if (a == "--threads") {
       threads = static_cast<int>(so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 1, 64));
+    } else if (a == "--no-spans") {
+      spans = false;
     } else if (a == "--model") {
       so::tools::addNameValue(argc, argv, &i, &model_values);
     } else if (a == "--frame") {
       frame = so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 0, 1000000);
     } else if (a == "--help") {
       std::cout << "usage: performance [--repeat N] [--only STAGE] [--scenario NAME [--frame K]] | --flight NAME "
-                   "[--pace-ms MS]; either with [--threads N]; [--model NAME=VALUE]...\n"
+                   "[--pace-ms MS]; either with [--threads N]; [--model NAME=VALUE]... [--no-spans]\n"
                    "Times the mapper's stages on the Table I frame (or frame K of a simulated flight, with its "
                    "stereo effects, seed 1) at 0.25 m (median and min-max of N runs, default 21) and OctoMap's "
                    "insertPointCloud on the same frame.\n"
@@ -162,6 +166,7 @@ int run(int argc, char** argv) {
                    "--threads N: draw, blur and fuse on N threads (default 1).\n"
                    "--model NAME=VALUE: a sensor model parameter of the default stage (e.g. gap_guard_cells=1), "
                    "repeatable.\n"
+                   "--no-spans: the default descends into the blocks it draws as spans (the form before them).\n"
                    "STAGE: "
                 << kStages << "\n";
       return 0;
@@ -170,7 +175,7 @@ int run(int argc, char** argv) {
     }
   }
   if (pace_ms > 0 && flight.empty()) throw so::tools::UsageError("--pace-ms needs --flight");
-  if (!flight.empty()) return flightPath(flight, pace_ms, threads);
+  if (!flight.empty()) return flightPath(flight, pace_ms, threads, spans);
   const bool quiet = !only.empty();
   auto wanted = [&](const std::string& stage) { return only.empty() || only == stage; };
 
@@ -218,6 +223,7 @@ int run(int argc, char** argv) {
     so::DrawingConfig config = so::DrawingConfig::mapperDefaults();
     config.resolution_m = resolution;
     config.threads = threads;
+    config.surface_spans = spans;
     for (const auto& [name, value] : model_values)
       if (!so::setNumberParameter(&config.sensor_model, name, value))
         throw so::tools::UsageError("--model: unknown name '" + name + "'");
