@@ -172,6 +172,8 @@ class LineDrawer {
   void drawPyramidParts(const Descent& s, LocalGrid* grid, DrawStatistics* stats, const DescendFrom& descend_from);
   /// Each used worker grid into @p grid by max, and back to kUnknown.
   void mergeWorkerGrids(const std::vector<PerWorker<char>>& used, LocalGrid* grid);
+  /// The ray through the centre of block (x, y) of a pyramid level, z = 1.
+  Eigen::Vector3d blockRay(int level, int x, int y) const;
   void descendBounded(const Descent& s, int level, int x, int y, double z_begin) const;
   /// The sub-blocks a bounded descent would draw one line each for (its leaves).
   struct SpanLeaves {

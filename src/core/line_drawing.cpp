@@ -515,10 +515,14 @@ RangeProfile LineDrawer::profileOf(const Descent& s, double ray_norm, float d_px
   return measuresRange(camera_, d_px) ? measuredProfile(camera_, table_, ray_norm, d_px) : s.free_profile;
 }
 
+Eigen::Vector3d LineDrawer::blockRay(int level, int x, int y) const {
+  const auto& cfg = camera_.config();
+  return camera_.rayThroughPixel(DisparityPyramid::centreOf(level, x, cfg.width_px),
+                                 DisparityPyramid::centreOf(level, y, cfg.height_px));
+}
+
 uint64_t LineDrawer::drawPixel(const Descent& s, int level, int x, int y, float d_px, double z_begin) const {
-  const double X = DisparityPyramid::centreOf(level, x, camera_.config().width_px);
-  const double Y = DisparityPyramid::centreOf(level, y, camera_.config().height_px);
-  const Eigen::Vector3d C_ray = camera_.rayThroughPixel(X, Y);  // z = 1
+  const Eigen::Vector3d C_ray = blockRay(level, x, y);  // z = 1
   const double norm = C_ray.norm();                             // |p_c| / z_c (eq. 2)
   return drawRay(s.grid, s.T_W_C.linear() * (C_ray / norm), profileOf(s, norm, d_px), z_begin * norm,
                  std::numeric_limits<double>::infinity());
@@ -582,10 +586,7 @@ void LineDrawer::descendBounded(const Descent& s, int level, int x, int y, doubl
   // z_i = c·f / 2^i (eq. 12) and are free up to the nearest measurement's
   // front: one ray through the block's centre draws that stretch for all of
   // them, its children's lines start at the depth where it ends.
-  const auto& cfg = camera_.config();
-  const double X = DisparityPyramid::centreOf(level, x, cfg.width_px);
-  const double Y = DisparityPyramid::centreOf(level, y, cfg.height_px);
-  const Eigen::Vector3d C_ray = camera_.rayThroughPixel(X, Y);  // z = 1
+  const Eigen::Vector3d C_ray = blockRay(level, x, y);  // z = 1
   const double norm = C_ray.norm();
   const RangeProfile nearest = profileOf(s, norm, d_max);
   const double z_shared = std::min(s.cell_f_m_px * powerOfTwo(-level),
@@ -645,14 +646,12 @@ bool LineDrawer::isSpan(const Descent& s, int level, int x, int y, SpanLeaves* l
 
 void LineDrawer::drawSpan(const Descent& s, int level, int x, int y, float d_max, const SpanLeaves& leaves,
                           double z_begin) const {
-  const auto& cfg = camera_.config();
   constexpr double kToTheEnd = std::numeric_limits<double>::infinity();
   // Free space along the block's centre ray up to the nearest measurement's
   // gap; its hit is drawn with its leaf's, where its own line would put it.
   // Up to the front of its profile with the sky value, as a descending
   // block's shared stretch: the sky guard silences it beside a hit.
-  const Eigen::Vector3d C_ray = camera_.rayThroughPixel(DisparityPyramid::centreOf(level, x, cfg.width_px),
-                                                        DisparityPyramid::centreOf(level, y, cfg.height_px));
+  const Eigen::Vector3d C_ray = blockRay(level, x, y);
   const double norm = C_ray.norm();
   RangeProfile nearest = profileOf(s, norm, d_max);
   nearest.hit_log_odds = 0.0f;
@@ -663,9 +662,7 @@ void LineDrawer::drawSpan(const Descent& s, int level, int x, int y, float d_max
   RangeProfile hit;
   hit.hit_log_odds = table_.hitLogOdds();
   for (int i = 0; i < leaves.count; ++i) {
-    const Eigen::Vector3d C_leaf =
-        camera_.rayThroughPixel(DisparityPyramid::centreOf(leaves.level[i], leaves.x[i], cfg.width_px),
-                                DisparityPyramid::centreOf(leaves.level[i], leaves.y[i], cfg.height_px));
+    const Eigen::Vector3d C_leaf = blockRay(leaves.level[i], leaves.x[i], leaves.y[i]);
     const double leaf_norm = C_leaf.norm();
     hit.l_p_m = measuredRange(camera_, leaf_norm, leaves.lo[i]).l_p_m;
     ++s.stats->coordinate_transfers;

@@ -519,7 +519,7 @@ TEST(SurfaceProfile, BothGuardsMatchAPlainReferenceAroundRunsOfHits) {
 // cells written are fewer; a block with a hole in its depths (the post
 // before the wall) is still descended, so the free space beside the post
 // stays. The matcher's noise is what splits the ground's blocks.
-TEST(SurfaceProfile, SpansDrawTheDescentsOccupiedCellsWithFewerLines) {
+TEST(SurfaceProfile, SpansDrawTheDescentsOccupiedCellsWritingFewer) {
   SyntheticScene scene;
   scene.addBox({-5.0, -40.0, -1.0}, {60.0, 40.0, 0.0});  // the ground
   scene.addBox({20.1, -20.0, -5.0}, {22.0, 20.0, 10.0});  // a wall
