@@ -627,16 +627,19 @@ bool LineDrawer::gatherLeaves(const Descent& s, int level, int x, int y, SpanLea
 
 bool LineDrawer::isSpan(const Descent& s, int level, int x, int y, SpanLeaves* leaves) const {
   if (!gatherLeaves(s, level, x, y, leaves) || leaves->count == 0) return false;
-  // Nearest first (insertion sort: a few dozen leaves); each next leaf must
-  // come within one measurement's gap of the depths before it.
+  // Nearest first, each next leaf must come within one measurement's gap
+  // of the depths before it. The order is sorted farthest first and walked
+  // backwards: the leaves come in image order, where the ground nears row by
+  // row, so the insertion sort has little to move. (The order among equal
+  // depths does not change the answer.)
   int order[SpanLeaves::kMaxLeaves];
   for (int i = 0; i < leaves->count; ++i) {
     int j = i;
-    for (; j > 0 && leaves->hi[order[j - 1]] < leaves->hi[i]; --j) order[j] = order[j - 1];
+    for (; j > 0 && leaves->hi[order[j - 1]] > leaves->hi[i]; --j) order[j] = order[j - 1];
     order[j] = i;
   }
-  float reached = leaves->lo[order[0]];
-  for (int i = 1; i < leaves->count; ++i) {
+  float reached = leaves->lo[order[leaves->count - 1]];
+  for (int i = leaves->count - 2; i >= 0; --i) {
     const int k = order[i];
     if (leaves->hi[k] < reached && !s.bound->isFaithful(leaves->hi[k], reached)) return false;  // a hole
     reached = std::min(reached, leaves->lo[k]);
