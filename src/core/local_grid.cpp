@@ -100,6 +100,7 @@ size_t LocalGrid::guardSlabs(const Guard& guard, int z_begin, int z_end) {
   // A guard that is off holds a value no cell holds: only two guards of
   // different radii need the distance.
   const bool by_distance = guard.sky_radius > 0 && guard.gap_radius > 0 && guard.sky_radius != guard.gap_radius;
+  const bool sky_only = guard.gap_radius <= 0;  // the default: one value to replace, at any distance in reach
   size_t marked = 0;
   // The cells within reach of a run [x0, x1] of occupied cells in row (y,
   // z): the union of its cells' neighbourhoods, a row of the box at a time
@@ -109,6 +110,14 @@ size_t LocalGrid::guardSlabs(const Guard& guard, int z_begin, int z_end) {
     for (int k = std::max(0, z - radius); k <= std::min(size_.z() - 1, z + radius); ++k)
       for (int j = std::max(0, y - radius); j <= std::min(size_.y() - 1, y + radius); ++j) {
         float* row = &data_[linearIndex(0, j, k)];
+        if (sky_only) {  // branch-free: a few cells a row, whose values a branch would mispredict
+          for (int h = h_begin; h <= h_end; ++h) {
+            const bool sky = row[h] == guard.sky_value;
+            marked += sky;
+            row[h] = sky ? sky_to : row[h];
+          }
+          continue;
+        }
         const int dist_jk = std::max(std::abs(j - y), std::abs(k - z));
         for (int h = h_begin; h <= h_end; ++h) {
           float& cell = row[h];
