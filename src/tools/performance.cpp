@@ -64,13 +64,23 @@ Timing timeIt(int repeats, const std::function<void()>& setup, const std::functi
   return t;
 }
 
+/// The sensor model parameters given with --model, by name, into @p config; throws on an unknown or invalid one.
+void applyModel(const std::map<std::string, double>& model_values, so::DrawingConfig* config) {
+  for (const auto& [name, value] : model_values)
+    if (!so::setNumberParameter(&config->sensor_model, name, value))
+      throw so::tools::UsageError("--model: unknown name '" + name + "'");
+  std::string why;
+  if (!config->isValid(&why)) throw so::tools::UsageError("--model: " + why);
+}
+
 /// The core of the mapper's path (shape and clear the grid, pyramids,
 /// drawing, blur as configured: off by default, encoding) on every frame of
 /// a simulated flight, per algorithm: the nodelet's work without ROS. With
 /// @p pace_ms > 0 the thread sleeps that long before each frame, as a mapper
 /// between its camera's images (a 10 Hz camera: 100 ms): what the caches and
 /// the CPU's idle states cost a frame that arrives after a pause.
-int flightPath(const std::string& scenario_name, long pace_ms, int threads, bool spans) {
+int flightPath(const std::string& scenario_name, long pace_ms, int threads, bool spans,
+               const std::map<std::string, double>& model_values) {
   const so::FlightScenario scenario = so::tools::scenarioNamed(scenario_name);
   std::vector<cv::Mat> images;
   for (size_t i = 0; i < scenario.T_W_B.size(); ++i) images.push_back(so::renderStereoFrame(scenario, i, 1));
@@ -89,6 +99,7 @@ int flightPath(const std::string& scenario_name, long pace_ms, int threads, bool
     config.algorithm = algorithm;
     config.threads = threads;
     config.surface_spans = spans;
+    if (mapper) applyModel(model_values, &config);
     so::DisparityDrawer drawer(scenario.camera, config);
     so::LocalGrid grid;
     so::GridUpdate update;
@@ -164,8 +175,8 @@ int run(int argc, char** argv) {
                    "map, on every frame of a simulated flight, with their mean, median, p99 and maximum; "
                    "--pace-ms MS sleeps MS before each frame, as between a camera's images.\n"
                    "--threads N: draw, blur and fuse on N threads (default 1).\n"
-                   "--model NAME=VALUE: a sensor model parameter of the default stage (e.g. gap_guard_cells=1), "
-                   "repeatable.\n"
+                   "--model NAME=VALUE: a sensor model parameter of the default stage and of the flight's "
+                   "line_pyramid_bounded row (e.g. gap_guard_cells=1), repeatable.\n"
                    "--no-spans: the default descends into the blocks it draws as spans (the form before them).\n"
                    "STAGE: "
                 << kStages << "\n";
@@ -175,7 +186,11 @@ int run(int argc, char** argv) {
     }
   }
   if (pace_ms > 0 && flight.empty()) throw so::tools::UsageError("--pace-ms needs --flight");
-  if (!flight.empty()) return flightPath(flight, pace_ms, threads, spans);
+  {  // a wrong --model before any stage runs
+    so::DrawingConfig checked = so::DrawingConfig::mapperDefaults();
+    applyModel(model_values, &checked);
+  }
+  if (!flight.empty()) return flightPath(flight, pace_ms, threads, spans, model_values);
   const bool quiet = !only.empty();
   auto wanted = [&](const std::string& stage) { return only.empty() || only == stage; };
 
@@ -224,11 +239,7 @@ int run(int argc, char** argv) {
     config.resolution_m = resolution;
     config.threads = threads;
     config.surface_spans = spans;
-    for (const auto& [name, value] : model_values)
-      if (!so::setNumberParameter(&config.sensor_model, name, value))
-        throw so::tools::UsageError("--model: unknown name '" + name + "'");
-    std::string why;
-    if (!config.isValid(&why)) throw so::tools::UsageError("--model: " + why);
+    applyModel(model_values, &config);
     so::DisparityDrawer drawer(camera, config);
     so::LocalGrid grid;
     const Timing t = timeIt(repeat, [&] { drawer.prepareGrid(T_W_C, &grid); },
