@@ -23,7 +23,6 @@
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
-#include "stereo_occupancy/parameter_table.h"
 #include "stereo_occupancy/sim/map_evaluation.h"
 #include "tool_support.h"
 
@@ -172,9 +171,7 @@ int run(int argc, char** argv) {
     so::DrawingConfig config = so::DrawingConfig::mapperDefaults();
     config.resolution_m = res;
     config.algorithm = algorithm;
-    for (const auto& [name, value] : model_values)
-      if (!so::setNumberParameter(&config.sensor_model, name, value))
-        throw tools::UsageError("--model: unknown name '" + name + "'");
+    tools::applyModelValues(model_values, &config);
     so::DisparityDrawer drawer(camera_config, config);
     so::LocalGrid grid;
     so::GridUpdate update;

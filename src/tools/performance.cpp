@@ -23,7 +23,6 @@
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
-#include "stereo_occupancy/parameter_table.h"
 #include "stereo_occupancy/sim/flight_simulation.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
 #include "stereo_occupancy/time_statistics.h"
@@ -64,15 +63,6 @@ Timing timeIt(int repeats, const std::function<void()>& setup, const std::functi
   return t;
 }
 
-/// The sensor model parameters given with --model, by name, into @p config; throws on an unknown or invalid one.
-void applyModel(const std::map<std::string, double>& model_values, so::DrawingConfig* config) {
-  for (const auto& [name, value] : model_values)
-    if (!so::setNumberParameter(&config->sensor_model, name, value))
-      throw so::tools::UsageError("--model: unknown name '" + name + "'");
-  std::string why;
-  if (!config->isValid(&why)) throw so::tools::UsageError("--model: " + why);
-}
-
 /// The core of the mapper's path (shape and clear the grid, pyramids,
 /// drawing, blur as configured: off by default, encoding) on every frame of
 /// a simulated flight, per algorithm: the nodelet's work without ROS. With
@@ -99,7 +89,7 @@ int flightPath(const std::string& scenario_name, long pace_ms, int threads, bool
     config.algorithm = algorithm;
     config.threads = threads;
     config.surface_spans = spans;
-    if (mapper) applyModel(model_values, &config);
+    if (mapper) so::tools::applyModelValues(model_values, &config);
     so::DisparityDrawer drawer(scenario.camera, config);
     so::LocalGrid grid;
     so::GridUpdate update;
@@ -188,7 +178,7 @@ int run(int argc, char** argv) {
   if (pace_ms > 0 && flight.empty()) throw so::tools::UsageError("--pace-ms needs --flight");
   {  // a wrong --model before any stage runs
     so::DrawingConfig checked = so::DrawingConfig::mapperDefaults();
-    applyModel(model_values, &checked);
+    so::tools::applyModelValues(model_values, &checked);
   }
   if (!flight.empty()) return flightPath(flight, pace_ms, threads, spans, model_values);
   const bool quiet = !only.empty();
@@ -239,7 +229,7 @@ int run(int argc, char** argv) {
     config.resolution_m = resolution;
     config.threads = threads;
     config.surface_spans = spans;
-    applyModel(model_values, &config);
+    so::tools::applyModelValues(model_values, &config);
     so::DisparityDrawer drawer(camera, config);
     so::LocalGrid grid;
     const Timing t = timeIt(repeat, [&] { drawer.prepareGrid(T_W_C, &grid); },

@@ -12,6 +12,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "stereo_occupancy/disparity_drawer.h"
+#include "stereo_occupancy/parameter_table.h"
 #include "stereo_occupancy/sim/flight_simulation.h"
 
 namespace stereo_occupancy {
@@ -55,6 +57,16 @@ inline void addNameValue(int argc, char** argv, int* i, std::map<std::string, do
   const size_t eq = kv.find('=');
   if (eq == std::string::npos || eq == 0) throw UsageError(option + " takes NAME=VALUE");
   (*values)[kv.substr(0, eq)] = parseNumber(option, kv.substr(eq + 1));
+}
+
+/// The sensor model parameters given with --model (NAME=VALUE, by name) into
+/// @p config; a UsageError for an unknown name or a value out of range.
+inline void applyModelValues(const std::map<std::string, double>& values, DrawingConfig* config) {
+  for (const auto& [name, value] : values)
+    if (!setNumberParameter(&config->sensor_model, name, value))
+      throw UsageError("--model: unknown name '" + name + "'");
+  std::string why;
+  if (!config->isValid(&why)) throw UsageError("--model: " + why);
 }
 
 /// The named simulated flight, or a UsageError listing the names.
