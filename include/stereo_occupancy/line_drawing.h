@@ -124,9 +124,11 @@ class LineDrawer {
     double upper[3] = {0.0, 0.0, 0.0};  ///< size - kMargin [cells]
   };
   RayGrid rayGrid(const Eigen::Vector3d& W_origin, LocalGrid* grid) const;
-  /// drawRay() in a RayGrid.
-  uint64_t drawRay(const RayGrid& g, const Eigen::Vector3d& W_dir, const RangeProfile& profile, double l_begin,
-                   double l_stop) const;
+  /// drawRay() in a RayGrid without the surface profile's point hit: the
+  /// lines of pixels and blocks draw it from the measured depth instead
+  /// (drawHitAtDepth()).
+  uint64_t drawLine(const RayGrid& g, const Eigen::Vector3d& W_dir, const RangeProfile& profile, double l_begin,
+                    double l_stop) const;
 
   /// What stays fixed during one (bounded or plain) descent.
   /// A block the workers descend from, and the depth its lines start at.

@@ -13,7 +13,7 @@
 
 #include "stereo_occupancy/integer_math.h"
 
-// drawRay()'s steps run once per line, 10^5 lines an image: inlined into it,
+// drawLine()'s steps run once per line, 10^5 lines an image: inlined into it,
 // as one function they were (out of line they cost time: docs/performance.md).
 #if defined(__GNUC__)
 #define STEREO_OCCUPANCY_INLINE inline __attribute__((always_inline))
@@ -183,11 +183,6 @@ LineDrawer::RayGrid LineDrawer::rayGrid(const Eigen::Vector3d& W_origin, LocalGr
   return g;
 }
 
-uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vector3d& W_dir, const RangeProfile& profile,
-                             LocalGrid* grid, double l_begin, double l_stop) const {
-  return drawRay(rayGrid(W_origin, grid), W_dir, profile, l_begin, l_stop);
-}
-
 namespace {
 
 /// The walk of the segment [t_begin, t_end] of the ray g.g0 + t·W_dir (t in cells).
@@ -254,6 +249,29 @@ STEREO_OCCUPANCY_INLINE uint64_t drawPointHit(const Grid& g, const Eigen::Vector
     index += cell * g.stride[i];
   }
   drawCell(g.data, index, profile.hit_log_odds);
+  return 1;
+}
+
+/// drawPointHit() for a ray known by its pixel: the cell that holds the
+/// measured point p_C = z·C_ray (eqs. 1, 2; C_ray has z = 1), if z_begin <=
+/// z and |p_C| <= the maximum range. From the depth, not from the range
+/// along the unit ray: no square root and no division, where a span draws
+/// one hit per leaf. Every line of a pixel or a block puts its hit here, so
+/// a span's leaf and the descent's line of that leaf share the cell.
+/// Returns the cells written (0 or 1).
+template <class Grid>
+STEREO_OCCUPANCY_INLINE uint64_t drawHitAtDepth(const Grid& g, const Eigen::Matrix3d& R_W_C,
+                                                const Eigen::Vector3d& C_ray, double z_m, double z_begin_m,
+                                                float hit_log_odds) {
+  if (!(z_m >= z_begin_m) || z_m * z_m * C_ray.squaredNorm() > g.max_range_m * g.max_range_m) return 0;
+  const Eigen::Vector3d W_offset_cells = (R_W_C * C_ray) * (z_m * g.inv_c);
+  int64_t index = 0;
+  for (int i = 0; i < 3; ++i) {
+    const int cell = floorToInt(g.g0[i] + W_offset_cells[i]);
+    if (cell < 0 || cell >= g.size[i]) return 0;
+    index += cell * g.stride[i];
+  }
+  drawCell(g.data, index, hit_log_odds);
   return 1;
 }
 
@@ -360,10 +378,10 @@ STEREO_OCCUPANCY_INLINE uint64_t drawInnerCellsClipped(const Grid& g, const Line
 
 }  // namespace
 
-uint64_t LineDrawer::drawRay(const RayGrid& g, const Eigen::Vector3d& W_dir, const RangeProfile& profile,
-                             double l_begin, double l_stop) const {
+uint64_t LineDrawer::drawLine(const RayGrid& g, const Eigen::Vector3d& W_dir, const RangeProfile& profile,
+                              double l_begin, double l_stop) const {
   const double l_end = std::min({static_cast<double>(profile.endRange()), g.max_range_m, l_stop});
-  uint64_t written = drawPointHit(g, W_dir, profile, l_begin, std::min(g.max_range_m, l_stop));
+  uint64_t written = 0;
   if (!(l_end > l_begin)) return written;
   const LineWalk w = walkOf(g, W_dir, l_begin * g.inv_c, l_end * g.inv_c);
   written += drawEndCell(g, W_dir, w, profile, w.first_slab, w.t_first);
@@ -377,6 +395,13 @@ uint64_t LineDrawer::drawRay(const RayGrid& g, const Eigen::Vector3d& W_dir, con
   written += drawEndCell(g, W_dir, w, profile, w.first_slab + (w.slabs - 1) * w.step,
                          w.t_first + (w.slabs - 1) * w.dt);
   return written;
+}
+
+uint64_t LineDrawer::drawRay(const Eigen::Vector3d& W_origin, const Eigen::Vector3d& W_dir, const RangeProfile& profile,
+                             LocalGrid* grid, double l_begin, double l_stop) const {
+  const RayGrid g = rayGrid(W_origin, grid);
+  return drawPointHit(g, W_dir, profile, l_begin, std::min(g.max_range_m, l_stop)) +
+         drawLine(g, W_dir, profile, l_begin, l_stop);
 }
 
 namespace {
@@ -490,10 +515,13 @@ void LineDrawer::drawImage(const cv::Mat& disparity, const Eigen::Isometry3d& T_
                 if (!camera_.isValidDisparity(d)) continue;  // no information
                 ++part_stats->used_image_pixels;
                 ++part_stats->coordinate_transfers;
-                const Eigen::Vector3d W_dir = R_W_C * camera_.rayThroughPixel(x, static_cast<double>(y)).normalized();
+                const Eigen::Vector3d C_ray = camera_.rayThroughPixel(x, static_cast<double>(y));
+                const RangeProfile profile = pixelProfile(camera_, table_, x, static_cast<double>(y), d);
                 part_stats->grid_cells_drawn +=
-                    drawRay(g, W_dir, pixelProfile(camera_, table_, x, static_cast<double>(y), d), 0.0,
-                            std::numeric_limits<double>::infinity());
+                    drawLine(g, R_W_C * C_ray.normalized(), profile, 0.0, std::numeric_limits<double>::infinity());
+                if (profile.hasPointHit())
+                  part_stats->grid_cells_drawn +=
+                      drawHitAtDepth(g, R_W_C, C_ray, camera_.depthFromDisparity(d), 0.0, profile.hit_log_odds);
               }
             });
 }
@@ -524,8 +552,12 @@ Eigen::Vector3d LineDrawer::blockRay(int level, int x, int y) const {
 uint64_t LineDrawer::drawPixel(const Descent& s, int level, int x, int y, float d_px, double z_begin) const {
   const Eigen::Vector3d C_ray = blockRay(level, x, y);  // z = 1
   const double norm = C_ray.norm();                             // |p_c| / z_c (eq. 2)
-  return drawRay(s.grid, s.T_W_C.linear() * (C_ray / norm), profileOf(s, norm, d_px), z_begin * norm,
-                 std::numeric_limits<double>::infinity());
+  const RangeProfile profile = profileOf(s, norm, d_px);
+  const uint64_t written = drawLine(s.grid, s.T_W_C.linear() * (C_ray / norm), profile, z_begin * norm,
+                                    std::numeric_limits<double>::infinity());
+  if (!profile.hasPointHit()) return written;
+  return written + drawHitAtDepth(s.grid, s.T_W_C.linear(), C_ray, camera_.depthFromDisparity(d_px), z_begin,
+                                  profile.hit_log_odds);
 }
 
 void LineDrawer::descend(const Descent& s, int level, int x, int y) const {
@@ -594,7 +626,7 @@ void LineDrawer::descendBounded(const Descent& s, int level, int x, int y, doubl
   if (z_shared > z_begin) {
     ++s.stats->coordinate_transfers;
     s.stats->grid_cells_drawn +=
-        drawRay(s.grid, s.T_W_C.linear() * (C_ray / norm), s.free_profile, z_begin * norm, z_shared * norm);
+        drawLine(s.grid, s.T_W_C.linear() * (C_ray / norm), s.free_profile, z_begin * norm, z_shared * norm);
     z_begin = z_shared;
   }
   const int w = s.min_pyramid.width(level - 1);
@@ -660,17 +692,15 @@ void LineDrawer::drawSpan(const Descent& s, int level, int x, int y, float d_max
   nearest.hit_log_odds = 0.0f;
   nearest.free_log_odds = s.free_profile.free_log_odds;
   ++s.stats->coordinate_transfers;
-  s.stats->grid_cells_drawn += drawRay(s.grid, s.T_W_C.linear() * (C_ray / norm), nearest, z_begin * norm, kToTheEnd);
-  // Each leaf's hit: the cell drawRay() would give its line's point hit.
-  RangeProfile hit;
-  hit.hit_log_odds = table_.hitLogOdds();
+  s.stats->grid_cells_drawn += drawLine(s.grid, s.T_W_C.linear() * (C_ray / norm), nearest, z_begin * norm, kToTheEnd);
+  // Each leaf's hit: the cell its own line would give it (drawPixel()).
+  const Eigen::Matrix3d R_W_C = s.T_W_C.linear();
+  const float hit = table_.hitLogOdds();
   for (int i = 0; i < leaves.count; ++i) {
     const Eigen::Vector3d C_leaf = blockRay(leaves.level[i], leaves.x[i], leaves.y[i]);
-    const double leaf_norm = C_leaf.norm();
-    hit.l_p_m = measuredRange(camera_, leaf_norm, leaves.lo[i]).l_p_m;
     ++s.stats->coordinate_transfers;
-    s.stats->grid_cells_drawn += drawPointHit(s.grid, s.T_W_C.linear() * (C_leaf / leaf_norm), hit, z_begin * leaf_norm,
-                                              s.grid.max_range_m);
+    s.stats->grid_cells_drawn +=
+        drawHitAtDepth(s.grid, R_W_C, C_leaf, camera_.depthFromDisparity(leaves.lo[i]), z_begin, hit);
   }
 }
 

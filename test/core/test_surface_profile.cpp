@@ -185,8 +185,8 @@ TEST(SurfaceProfile, EachHitLandsInItsPointsCell) {
       hit += grid.at(local.x(), local.y(), local.z()) > 0.0f;
       point_cell[grid.linearIndex(local.x(), local.y(), local.z())] = 1;
     }
-  // A point on a cell's face may round to either cell (the drawing's ranges
-  // are floats): a few in 10^5.
+  // A point on a cell's face may round to either cell (the drawing adds the
+  // camera centre and the point in another order): a few in 10^5.
   ASSERT_GT(pixels, 50000);
   EXPECT_GE(hit, pixels - pixels / 10000);
   size_t occupied = 0, occupied_elsewhere = 0;
