@@ -35,6 +35,13 @@ SimdLevel availableSimdLevel();
 /// True for kScalar and for availableSimdLevel().
 bool isAvailable(SimdLevel level);
 
+/// Up to this many keys stableOrderAscending() orders by rank, without branches.
+constexpr int kRankOrderedKeys = 24;
+/// @p order[0 .. count) = the indices of @p keys (no NaN) by ascending key,
+/// equal keys in their index order (a stable sort's order). The bounded
+/// pyramid's hole test orders a span's leaves with it.
+void stableOrderAscending(const float* keys, int count, int* order);
+
 /// Draws disparity images into a LocalGrid by line drawing. Holds references
 /// to the camera, the lookup tables and the grid; not thread-safe (but it
 /// may draw one image on several threads: setWorkers()).

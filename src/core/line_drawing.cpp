@@ -140,6 +140,27 @@ int freeRunNeon(float* data, int k, int k_end, float free_value, LineCursor* r) 
 
 }  // namespace
 
+void stableOrderAscending(const float* keys, int count, int* order) {
+  if (count > kRankOrderedKeys) {  // insertion sort
+    for (int i = 0; i < count; ++i) {
+      int j = i;
+      for (; j > 0 && keys[order[j - 1]] > keys[i]; --j) order[j] = order[j - 1];
+      order[j] = i;
+    }
+    return;
+  }
+  // A span has about ten leaves, on which the insertion sort's branches
+  // mispredicted: a key's place is the number of keys before it in the
+  // order, counted by compares without branches.
+  for (int i = 0; i < count; ++i) {
+    const float key = keys[i];
+    int rank = 0;
+    for (int j = 0; j < i; ++j) rank += keys[j] <= key;
+    for (int j = i + 1; j < count; ++j) rank += keys[j] < key;
+    order[rank] = i;
+  }
+}
+
 SimdLevel availableSimdLevel() {
 #if STEREO_OCCUPANCY_X86_64_SIMD
   return SimdLevel::kSse2;
@@ -661,15 +682,9 @@ bool LineDrawer::isSpan(const Descent& s, int level, int x, int y, SpanLeaves* l
   if (!gatherLeaves(s, level, x, y, leaves) || leaves->count == 0) return false;
   // Nearest first, each next leaf must come within one measurement's gap
   // of the depths before it. The order is sorted farthest first and walked
-  // backwards: the leaves come in image order, where the ground nears row by
-  // row, so the insertion sort has little to move. (The order among equal
-  // depths does not change the answer.)
+  // backwards. (The order among equal depths does not change the answer.)
   int order[SpanLeaves::kMaxLeaves];
-  for (int i = 0; i < leaves->count; ++i) {
-    int j = i;
-    for (; j > 0 && leaves->hi[order[j - 1]] > leaves->hi[i]; --j) order[j] = order[j - 1];
-    order[j] = i;
-  }
+  stableOrderAscending(leaves->hi, leaves->count, order);
   float reached = leaves->lo[order[leaves->count - 1]];
   for (int i = leaves->count - 2; i >= 0; --i) {
     const int k = order[i];

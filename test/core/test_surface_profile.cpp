@@ -9,6 +9,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <numeric>
 #include <random>
 #include <string>
 #include <utility>
@@ -570,4 +571,23 @@ TEST(SurfaceProfile, SpansDrawTheDescentsOccupiedCellsWritingFewer) {
     // Without the hole test the post's blocks would be spans: 10-16 % less.
     EXPECT_GE(freeBesideThePost(with), 0.98 * freeBesideThePost(without));
   }
+}
+
+// The hole test walks a span's leaves by their largest disparity. The order
+// by rank (up to kRankOrderedKeys leaves) and the insertion sort above it
+// are a stable sort's order, also where leaves share a disparity (the
+// matcher's disparities are quantised) and for every count up to kMaxLeaves.
+TEST(SurfaceProfile, LeavesAreOrderedAsAStableSortOrdersThem) {
+  std::mt19937 random(11);
+  std::uniform_int_distribution<int> quantised(0, 12);
+  for (int count = 0; count <= 64; ++count)
+    for (int trial = 0; trial < 20; ++trial) {
+      std::vector<float> keys(static_cast<size_t>(count));
+      for (float& key : keys) key = 4.0f + 0.25f * static_cast<float>(quantised(random));
+      std::vector<int> order(static_cast<size_t>(count), -1), expected(static_cast<size_t>(count));
+      std::iota(expected.begin(), expected.end(), 0);
+      std::stable_sort(expected.begin(), expected.end(), [&](int a, int b) { return keys[a] < keys[b]; });
+      stableOrderAscending(keys.data(), count, order.data());
+      ASSERT_EQ(order, expected) << count << " keys";
+    }
 }
