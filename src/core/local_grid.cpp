@@ -46,7 +46,8 @@ constexpr float kNoValue = std::numeric_limits<float>::quiet_NaN();
 }  // namespace
 
 size_t LocalGrid::silenceNearOccupied(float value, int radius, WorkerPool* pool) {
-  if (radius <= 0) return 0;
+  // A zero silenced is the zero it was: counted, it would be counted again by each run that reaches it.
+  if (radius <= 0 || value == 0.0f) return 0;
   return guardNearOccupied({value, radius, kNoValue, 0}, pool);
 }
 

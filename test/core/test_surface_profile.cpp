@@ -307,6 +307,10 @@ TEST(SurfaceProfile, SilenceNearOccupiedTouchesOnlyTheSkyNearHits) {
   // Around (4, 4, 4) the 124 within two cells but the 26 within one; around
   // the corner 26, one of them, (2, 2, 2), shared.
   EXPECT_EQ(grid.silenceNearOccupied(sky, 2), (124u - 26u) + 26u - 1u);
+  // Silencing 0 changes no cell, and counts none (the zeros it made above
+  // lie next to two occupied cells).
+  EXPECT_EQ(grid.silenceNearOccupied(0.0f, 2), 0u);
+  EXPECT_EQ(grid.silenceNearOccupied(-0.0f, 1), 0u);
 }
 
 // The gap guard: a wall at 20.1 m, where the gap is Δl = 0.95 m deep (four
