@@ -120,6 +120,8 @@ class LineDrawer {
   /// Built once per image, not once per line.
   struct RayGrid {
     Eigen::Vector3d g0;  ///< line origin relative to the grid's lower corner [cells]
+    Eigen::Vector3d W_origin;    ///< the camera centre [m]
+    Eigen::Vector3i origin_index;  ///< global index of the grid's first cell
     double c = 0.0;      ///< cell size [m]
     double inv_c = 0.0;  ///< 1 / c [1/m]
     double max_range_m = 0.0;

@@ -194,6 +194,8 @@ LineDrawer::RayGrid LineDrawer::rayGrid(const Eigen::Vector3d& W_origin, LocalGr
   g.c = grid->resolution();
   g.inv_c = 1.0 / g.c;
   g.g0 = (W_origin - grid->originPosition()) * g.inv_c;
+  g.W_origin = W_origin;
+  g.origin_index = grid->originIndex();
   g.max_range_m = camera_.config().max_range_m;
   g.size = grid->size();
   g.stride[0] = 1;
@@ -274,21 +276,23 @@ STEREO_OCCUPANCY_INLINE uint64_t drawPointHit(const Grid& g, const Eigen::Vector
 }
 
 /// drawPointHit() for a ray known by its pixel: the cell that holds the
-/// measured point p_C = z·C_ray (eqs. 1, 2; C_ray has z = 1), if z_begin <=
-/// z and |p_C| <= the maximum range. From the depth, not from the range
-/// along the unit ray: no square root and no division, where a span draws
-/// one hit per leaf. Every line of a pixel or a block puts its hit here, so
-/// a span's leaf and the descent's line of that leaf share the cell.
-/// Returns the cells written (0 or 1).
+/// measured point W_p = T_W_C·(z·C_ray) (eqs. 1, 2; C_ray has z = 1), if
+/// z_begin <= z and |p_C| <= the maximum range. The point as a point cloud
+/// holds it, and its cell as OctoMap keys it (floor(W_p / c), by the
+/// reciprocal), so that a pixel's hit and OctoMap's endpoint of the same
+/// point agree also on a cell's face (quantised disparities put many points
+/// there). No square root or division: a span draws one hit per leaf. The
+/// lines of pixels and blocks put their hits here too, so a span's leaf and
+/// the descent's line of it share the cell. Returns the cells written (0 or 1).
 template <class Grid>
 STEREO_OCCUPANCY_INLINE uint64_t drawHitAtDepth(const Grid& g, const Eigen::Matrix3d& R_W_C,
                                                 const Eigen::Vector3d& C_ray, double z_m, double z_begin_m,
                                                 float hit_log_odds) {
   if (!(z_m >= z_begin_m) || z_m * z_m * C_ray.squaredNorm() > g.max_range_m * g.max_range_m) return 0;
-  const Eigen::Vector3d W_offset_cells = (R_W_C * C_ray) * (z_m * g.inv_c);
+  const Eigen::Vector3d W_point = R_W_C * (C_ray * z_m) + g.W_origin;
   int64_t index = 0;
   for (int i = 0; i < 3; ++i) {
-    const int cell = floorToInt(g.g0[i] + W_offset_cells[i]);
+    const int cell = floorToInt(W_point[i] * g.inv_c) - g.origin_index[i];
     if (cell < 0 || cell >= g.size[i]) return 0;
     index += cell * g.stride[i];
   }
