@@ -80,9 +80,10 @@ class LocalGrid {
 
   /// Sets the cells holding exactly @p value within @p radius cells
   /// (Chebyshev) of an occupied cell (log-odds > 0) to 0, no information;
-  /// returns how many (none for @p value 0). With value = the sky's log-odds: a ray that measured
-  /// no range says nothing next to what the image did measure. With a
-  /// @p pool, slabs of z on its workers: the same grid and count.
+  /// returns how many (none for @p value 0). With value = the sky's
+  /// log-odds: a ray that measured no range says nothing next to what the
+  /// image did measure. With a @p pool, slabs of z on its workers: the same
+  /// grid and count.
   size_t silenceNearOccupied(float value, int radius, WorkerPool* pool = nullptr);
 
   /// Sets the cells holding 0 (no information) that lie farther than

@@ -277,13 +277,11 @@ STEREO_OCCUPANCY_INLINE uint64_t drawPointHit(const Grid& g, const Eigen::Vector
 
 /// drawPointHit() for a ray known by its pixel: the cell that holds the
 /// measured point W_p = T_W_C·(z·C_ray) (eqs. 1, 2; C_ray has z = 1), if
-/// z_begin <= z and |p_C| <= the maximum range. The point as a point cloud
-/// holds it, and its cell as OctoMap keys it (floor(W_p / c), by the
-/// reciprocal), so that a pixel's hit and OctoMap's endpoint of the same
-/// point agree also on a cell's face (quantised disparities put many points
-/// there). No square root or division: a span draws one hit per leaf. The
-/// lines of pixels and blocks put their hits here too, so a span's leaf and
-/// the descent's line of it share the cell. Returns the cells written (0 or 1).
+/// z_begin <= z and |p_C| <= the maximum range: floor(W_p / c), by the
+/// reciprocal (as LocalGrid::globalIndex(), exactly where 1/c is exact).
+/// No square root or division: a span draws one hit per leaf. The lines of
+/// pixels and blocks put their hits here too, so a span's leaf and the
+/// descent's line of it share the cell. Returns the cells written (0 or 1).
 template <class Grid>
 STEREO_OCCUPANCY_INLINE uint64_t drawHitAtDepth(const Grid& g, const Eigen::Matrix3d& R_W_C,
                                                 const Eigen::Vector3d& C_ray, double z_m, double z_begin_m,

@@ -86,7 +86,7 @@ TEST(OfflineTools, CompareWithOctomapScoresEveryMethod) {
 // endpoint: OctoMap's recall (within 0.5 points) and precision. The
 // mapper's default draws one hit per pyramid block whose pixels lie within
 // a cell of each other across the ray: OctoMap's precision, at most 1.5
-// points less recall (docs/quality.md: 73.1 against 74.2 %). Both call less
+// points less recall (docs/quality.md: 73.0 against 74.2 %). Both call less
 // than half as much of the true surface free (4.8 against 14.2 %).
 TEST(OfflineTools, RealStereoPairDefaultAgainstOctomap) {
   enum { kPrecision = 2, kRecall = 3, kF1 = 4, kCalledFree = 5, kOccupied = 6 };
