@@ -35,52 +35,104 @@ struct FirstLevels {
   float invalid;
 };
 
-/// Row y of level 1 and rows 2y, 2y + 1 of level 0 from the input rows
-/// @p in0 and @p in1 (the same row for an odd last one): each pair of input
-/// rows is sanitised into level 0 and reduced into a row of level 1 while
-/// it is in registers, with Reduction::op, four lanes at a time with
-/// Reduction::op4. NaN, negative and out-of-range values carry no information.
+/// The rows a pass writes for one pyramid: rows 2y and 2y + 1 of level 0
+/// (the same row for an odd last input row) and row y of level 1.
+struct RowPair {
+  float* s0;
+  float* s1;
+  float* out;
+};
+RowPair rowPair(const FirstLevels& levels, int y, bool two_rows) {
+  float* s0 = levels.d0->ptr<float>(2 * y);
+  return {s0, two_rows ? levels.d0->ptr<float>(2 * y + 1) : s0, levels.d1->ptr<float>(y)};
+}
+
+/// sanitiseAndReduceRow() from block @p x on, one value at a time.
 template <typename Reduction>
-void sanitiseAndReduceRow(const float* in0, const float* in1, int cols, StereoCameraModel::DisparityValidity valid,
-                          const FirstLevels& out_levels, int y) {
+void sanitiseAndReduceFrom(const float* in0, const float* in1, int cols, StereoCameraModel::DisparityValidity valid,
+                           float invalid, const RowPair& r, int x) {
   const int w = (cols + 1) / 2;
   const int full = cols / 2;  // blocks with two columns
-  const bool two_rows = in1 != in0;
-  const float invalid = out_levels.invalid;
   auto sanitise = [&](float d) { return valid(d) ? d : invalid; };
-  float* s0 = out_levels.d0->ptr<float>(2 * y);
-  float* s1 = two_rows ? out_levels.d0->ptr<float>(2 * y + 1) : s0;
-  float* out = out_levels.d1->ptr<float>(y);
-  int x = 0;
-#if defined(__SSE2__)
-  const __m128 zero = _mm_setzero_ps(), lo = _mm_set1_ps(valid.min_px), hi = _mm_set1_ps(valid.max_px);
-  const __m128 inv = _mm_set1_ps(invalid);
-  auto sanitise4 = [&](const float* in, float* s) {  // the same as sanitise(), four at a time
-    const __m128 d = _mm_loadu_ps(in);
-    const __m128 ok = _mm_or_ps(_mm_cmpeq_ps(d, zero), _mm_and_ps(_mm_cmpge_ps(d, lo), _mm_cmple_ps(d, hi)));
-    const __m128 v = _mm_or_ps(_mm_and_ps(ok, d), _mm_andnot_ps(ok, inv));
-    _mm_storeu_ps(s, v);
-    return v;
-  };
-  for (; 2 * x + 8 <= cols; x += 4) {  // four blocks: eight columns of both rows
-    const __m128 a0 = sanitise4(in0 + 2 * x, s0 + 2 * x), a1 = sanitise4(in0 + 2 * x + 4, s0 + 2 * x + 4);
-    const __m128 b0 = sanitise4(in1 + 2 * x, s1 + 2 * x), b1 = sanitise4(in1 + 2 * x + 4, s1 + 2 * x + 4);
-    const __m128 top = Reduction::op4(_mm_shuffle_ps(a0, a1, _MM_SHUFFLE(2, 0, 2, 0)),
-                                      _mm_shuffle_ps(a0, a1, _MM_SHUFFLE(3, 1, 3, 1)));
-    const __m128 bottom = Reduction::op4(_mm_shuffle_ps(b0, b1, _MM_SHUFFLE(2, 0, 2, 0)),
-                                         _mm_shuffle_ps(b0, b1, _MM_SHUFFLE(3, 1, 3, 1)));
-    _mm_storeu_ps(out + x, Reduction::op4(top, bottom));
-  }
-#endif
   for (; x < full; ++x) {
-    const float a = s0[2 * x] = sanitise(in0[2 * x]), b = s0[2 * x + 1] = sanitise(in0[2 * x + 1]);
-    const float c = s1[2 * x] = sanitise(in1[2 * x]), d = s1[2 * x + 1] = sanitise(in1[2 * x + 1]);
-    out[x] = Reduction::op(Reduction::op(a, b), Reduction::op(c, d));
+    const float a = r.s0[2 * x] = sanitise(in0[2 * x]), b = r.s0[2 * x + 1] = sanitise(in0[2 * x + 1]);
+    const float c = r.s1[2 * x] = sanitise(in1[2 * x]), d = r.s1[2 * x + 1] = sanitise(in1[2 * x + 1]);
+    r.out[x] = Reduction::op(Reduction::op(a, b), Reduction::op(c, d));
   }
   if (full < w) {
-    const float a = s0[2 * full] = sanitise(in0[2 * full]), c = s1[2 * full] = sanitise(in1[2 * full]);
-    out[full] = Reduction::op(a, c);
+    const float a = r.s0[2 * full] = sanitise(in0[2 * full]), c = r.s1[2 * full] = sanitise(in1[2 * full]);
+    r.out[full] = Reduction::op(a, c);
   }
+}
+
+#if defined(__SSE2__)
+/// sanitise()'s test of an input value, four at a time in SSE2 lanes.
+struct Lanes4 {
+  __m128 zero = _mm_setzero_ps(), lo, hi;
+  explicit Lanes4(StereoCameraModel::DisparityValidity valid)
+      : lo(_mm_set1_ps(valid.min_px)), hi(_mm_set1_ps(valid.max_px)) {}
+  __m128 ok(__m128 d) const {
+    return _mm_or_ps(_mm_cmpeq_ps(d, zero), _mm_and_ps(_mm_cmpge_ps(d, lo), _mm_cmple_ps(d, hi)));
+  }
+};
+/// Four blocks of level 1 (eight columns of both rows) for one pyramid:
+/// the input values, tested once (@p ok) and masked (@p valid_d), take the
+/// pyramid's invalid value where they failed (the min's and the max's
+/// differ), go to level 0 and are reduced with Reduction::op4 into level 1.
+template <typename Reduction>
+#if defined(__GNUC__)
+__attribute__((always_inline))  // out of line, the lanes went through memory
+#endif
+inline void reduceLanes(const __m128 (&ok)[4], const __m128 (&valid_d)[4], __m128 invalid, const RowPair& r, int x) {
+  __m128 v[4];
+  for (int k = 0; k < 4; ++k) v[k] = _mm_or_ps(valid_d[k], _mm_andnot_ps(ok[k], invalid));
+  _mm_storeu_ps(r.s0 + 2 * x, v[0]);
+  _mm_storeu_ps(r.s0 + 2 * x + 4, v[1]);
+  _mm_storeu_ps(r.s1 + 2 * x, v[2]);
+  _mm_storeu_ps(r.s1 + 2 * x + 4, v[3]);
+  const __m128 top = Reduction::op4(_mm_shuffle_ps(v[0], v[1], _MM_SHUFFLE(2, 0, 2, 0)),
+                                    _mm_shuffle_ps(v[0], v[1], _MM_SHUFFLE(3, 1, 3, 1)));
+  const __m128 bottom = Reduction::op4(_mm_shuffle_ps(v[2], v[3], _MM_SHUFFLE(2, 0, 2, 0)),
+                                       _mm_shuffle_ps(v[2], v[3], _MM_SHUFFLE(3, 1, 3, 1)));
+  _mm_storeu_ps(r.out + x, Reduction::op4(top, bottom));
+}
+#endif
+
+/// Row y of level 1 and rows 2y, 2y + 1 of level 0 from the input rows
+/// @p in0 and @p in1 (the same row for an odd last one), for the min
+/// pyramid if @p min_levels is set and the max pyramid if @p max_levels
+/// is: each pair of input rows is sanitised into level 0 and reduced into
+/// a row of level 1 while it is in registers, with the pyramid's reduction
+/// (MinDisparity, MaxDisparity), four blocks at a time in SSE2 lanes; with
+/// both, each value is loaded and tested once. NaN, negative and
+/// out-of-range values carry no information. kMin and kMax say which are
+/// set, so that one pyramid's loop has no branches for the other.
+template <bool kMin, bool kMax>
+void sanitiseAndReduceRow(const float* in0, const float* in1, int cols, StereoCameraModel::DisparityValidity valid,
+                          const FirstLevels* min_levels, const FirstLevels* max_levels, int y) {
+  const bool two_rows = in1 != in0;
+  RowPair min_rows{}, max_rows{};
+  if constexpr (kMin) min_rows = rowPair(*min_levels, y, two_rows);
+  if constexpr (kMax) max_rows = rowPair(*max_levels, y, two_rows);
+  int x = 0;
+#if defined(__SSE2__)
+  const Lanes4 lanes(valid);
+  const __m128 min_invalid = _mm_set1_ps(kMin ? min_levels->invalid : 0.0f);
+  const __m128 max_invalid = _mm_set1_ps(kMax ? max_levels->invalid : 0.0f);
+  for (; 2 * x + 8 <= cols; x += 4) {  // four blocks: eight columns of both rows
+    const __m128 d[4] = {_mm_loadu_ps(in0 + 2 * x), _mm_loadu_ps(in0 + 2 * x + 4), _mm_loadu_ps(in1 + 2 * x),
+                         _mm_loadu_ps(in1 + 2 * x + 4)};
+    __m128 ok[4], valid_d[4];
+    for (int k = 0; k < 4; ++k) {
+      ok[k] = lanes.ok(d[k]);
+      valid_d[k] = _mm_and_ps(ok[k], d[k]);
+    }
+    if constexpr (kMin) reduceLanes<MinDisparity>(ok, valid_d, min_invalid, min_rows, x);
+    if constexpr (kMax) reduceLanes<MaxDisparity>(ok, valid_d, max_invalid, max_rows, x);
+  }
+#endif
+  if constexpr (kMin) sanitiseAndReduceFrom<MinDisparity>(in0, in1, cols, valid, min_levels->invalid, min_rows, x);
+  if constexpr (kMax) sanitiseAndReduceFrom<MaxDisparity>(in0, in1, cols, valid, max_levels->invalid, max_rows, x);
 }
 
 /// The rows [y_begin, y_end) of level 1 (and their rows of level 0) of the
@@ -91,8 +143,12 @@ void sanitiseAndReduce(const cv::Mat& disparity, StereoCameraModel::DisparityVal
   for (int y = y_begin; y < y_end; ++y) {  // rows of level 1
     const float* in0 = disparity.ptr<float>(2 * y);
     const float* in1 = 2 * y + 1 < disparity.rows ? disparity.ptr<float>(2 * y + 1) : in0;  // an odd last row
-    if (min_levels) sanitiseAndReduceRow<MinDisparity>(in0, in1, disparity.cols, valid, *min_levels, y);
-    if (max_levels) sanitiseAndReduceRow<MaxDisparity>(in0, in1, disparity.cols, valid, *max_levels, y);
+    if (min_levels && max_levels)
+      sanitiseAndReduceRow<true, true>(in0, in1, disparity.cols, valid, min_levels, max_levels, y);
+    else if (min_levels)
+      sanitiseAndReduceRow<true, false>(in0, in1, disparity.cols, valid, min_levels, nullptr, y);
+    else
+      sanitiseAndReduceRow<false, true>(in0, in1, disparity.cols, valid, nullptr, max_levels, y);
   }
 }
 
