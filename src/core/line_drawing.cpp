@@ -253,6 +253,21 @@ STEREO_OCCUPANCY_INLINE uint64_t drawEndCell(const Grid& g, const Eigen::Vector3
   return 1;
 }
 
+/// p_hit in the cell that holds the world point @p W_point: floor(W_p / c)
+/// by the reciprocal, as LocalGrid::globalIndex() keys it (exactly where 1/c
+/// is exact), skipped outside the grid. Returns the cells written (0 or 1).
+template <class Grid>
+STEREO_OCCUPANCY_INLINE uint64_t drawHitAt(const Grid& g, const Eigen::Vector3d& W_point, float hit_log_odds) {
+  int64_t index = 0;
+  for (int i = 0; i < 3; ++i) {
+    const int cell = floorToInt(W_point[i] * g.inv_c) - g.origin_index[i];
+    if (cell < 0 || cell >= g.size[i]) return 0;
+    index += cell * g.stride[i];
+  }
+  drawCell(g.data, index, hit_log_odds);
+  return 1;
+}
+
 /// The surface profile's hit (RangeProfile::hasPointHit()): p_hit in the cell
 /// that holds the measured point, if l_begin <= l_p <= l_stop. A line's walk
 /// takes one cell per slab, at the slab's centre plane, and a slab spans dt
@@ -265,37 +280,21 @@ STEREO_OCCUPANCY_INLINE uint64_t drawPointHit(const Grid& g, const Eigen::Vector
                                               const RangeProfile& profile, double l_begin, double l_stop) {
   const double l_p = profile.l_p_m;
   if (!profile.hasPointHit() || !(l_p >= l_begin && l_p <= l_stop)) return 0;
-  int64_t index = 0;
-  for (int i = 0; i < 3; ++i) {
-    const int cell = floorToInt(g.g0[i] + W_dir[i] * (l_p * g.inv_c));
-    if (cell < 0 || cell >= g.size[i]) return 0;
-    index += cell * g.stride[i];
-  }
-  drawCell(g.data, index, profile.hit_log_odds);
-  return 1;
+  return drawHitAt(g, g.W_origin + W_dir * l_p, profile.hit_log_odds);
 }
 
-/// drawPointHit() for a ray known by its pixel: the cell that holds the
-/// measured point W_p = T_W_C·(z·C_ray) (eqs. 1, 2; C_ray has z = 1), if
-/// z_begin <= z and |p_C| <= the maximum range: floor(W_p / c), by the
-/// reciprocal (as LocalGrid::globalIndex(), exactly where 1/c is exact).
-/// No square root or division: a span draws one hit per leaf. The lines of
-/// pixels and blocks put their hits here too, so a span's leaf and the
-/// descent's line of it share the cell. Returns the cells written (0 or 1).
+/// drawPointHit() for a ray known by its pixel: the measured point
+/// W_p = T_W_C·(z·C_ray) (eqs. 1, 2; C_ray has z = 1), if z_begin <= z and
+/// |p_C| <= the maximum range. No square root or division: a span draws
+/// one hit per leaf. The lines of pixels and blocks put their hits here
+/// too, so a span's leaf and the descent's line of it share the cell.
+/// Returns the cells written (0 or 1).
 template <class Grid>
 STEREO_OCCUPANCY_INLINE uint64_t drawHitAtDepth(const Grid& g, const Eigen::Matrix3d& R_W_C,
                                                 const Eigen::Vector3d& C_ray, double z_m, double z_begin_m,
                                                 float hit_log_odds) {
   if (!(z_m >= z_begin_m) || z_m * z_m * C_ray.squaredNorm() > g.max_range_m * g.max_range_m) return 0;
-  const Eigen::Vector3d W_point = R_W_C * (C_ray * z_m) + g.W_origin;
-  int64_t index = 0;
-  for (int i = 0; i < 3; ++i) {
-    const int cell = floorToInt(W_point[i] * g.inv_c) - g.origin_index[i];
-    if (cell < 0 || cell >= g.size[i]) return 0;
-    index += cell * g.stride[i];
-  }
-  drawCell(g.data, index, hit_log_odds);
-  return 1;
+  return drawHitAt(g, R_W_C * (C_ray * z_m) + g.W_origin, hit_log_odds);
 }
 
 /// The cursor at the second slab, the first inner one.
