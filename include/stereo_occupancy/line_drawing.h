@@ -71,6 +71,12 @@ class LineDrawer {
     for (const auto& g : worker_grids_) cells += g.capacity();
     return cells;
   }
+  /// After drawImage(), drawPyramid() or drawPyramidBounded(): one flag per
+  /// block of the grid drawn (LocalGrid::numBlocks()), nonzero where a line
+  /// put its point hit. With the surface profile, whose table holds no
+  /// occupied value, these are the blocks of all the grid's occupied cells
+  /// (LocalGrid::applySurfaceGuards() need look nowhere else).
+  const std::vector<uint8_t>& hitBlocks() const { return hit_blocks_; }
   /// Pyramid blocks per worker a pyramid's descent is split into: enough to share the work evenly.
   static constexpr int kPartsPerWorker = 16;
 
@@ -128,11 +134,15 @@ class LineDrawer {
     Eigen::Vector3i size;
     int64_t stride[3] = {0, 0, 0};  ///< index steps along x, y, z
     float* data = nullptr;
+    uint8_t* hit_blocks = nullptr;  ///< hitBlocks() of the grid drawn, or null: hits not flagged
+    int64_t blocks_per_row = 0;     ///< LocalGrid::blocksPerRow()
     /// A line whose ends lie in [kMargin, upper) on every axis lies inside the grid [cells].
     static constexpr double kMargin = 1e-3;
     double upper[3] = {0.0, 0.0, 0.0};  ///< size - kMargin [cells]
   };
   RayGrid rayGrid(const Eigen::Vector3d& W_origin, LocalGrid* grid) const;
+  /// rayGrid() for an image: its hits flag their blocks in hitBlocks(), all 0 at first.
+  RayGrid imageGrid(const Eigen::Vector3d& W_origin, LocalGrid* grid);
   /// drawRay() in a RayGrid without the surface profile's point hit: the
   /// lines of pixels and blocks draw it from the measured depth instead
   /// (drawHitAtDepth()).
@@ -161,7 +171,7 @@ class LineDrawer {
   };
   Descent descent(const DisparityPyramid& min_pyramid, const DisparityPyramid* max_pyramid,
                   const DisparityBlockBound* bound, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
-                  DrawStatistics* stats) const;
+                  DrawStatistics* stats);
 
   /// pixelProfile() with the ray's norm at hand (|p_c| / z_c, eq. 2) and the free profile built once.
   RangeProfile profileOf(const Descent& s, double ray_norm, float d_px) const;
@@ -211,6 +221,8 @@ class LineDrawer {
   bool surface_spans_ = true;
   WorkerPool* pool_ = nullptr;
   std::vector<std::vector<float>> worker_grids_;  ///< worker w >= 1 draws into [w - 1]; kUnknown between images
+  std::vector<uint8_t> hit_blocks_;               ///< hitBlocks()
+  std::vector<std::vector<uint8_t>> worker_hit_blocks_;  ///< worker w >= 1 flags its hits' blocks in [w - 1]
 };
 
 }  // namespace stereo_occupancy

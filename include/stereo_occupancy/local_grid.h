@@ -21,6 +21,10 @@
 
 namespace stereo_occupancy {
 
+/// Cells tested at once by blockHasInformation(); a LocalGrid's row is
+/// also split into blocks of this many cells (LocalGrid::numBlocks()).
+constexpr int kInformationBlock = 16;
+
 /// Dense 3D array of log-odds over an axis-aligned box of the world frame W.
 ///
 /// Cell (i, j, k) of the global grid of cell size c spans
@@ -53,6 +57,11 @@ class LocalGrid {
 
   /// Position of the grid's lower corner in W [m].
   Eigen::Vector3d originPosition() const { return origin_index_.cast<double>() * resolution_m_; }
+
+  /// Blocks of kInformationBlock cells along x in a row (the last may be shorter).
+  int blocksPerRow() const { return (size_.x() + kInformationBlock - 1) / kInformationBlock; }
+  /// Blocks of the grid: blocksPerRow() per row, the rows (y, z) in the cells' order.
+  size_t numBlocks() const { return static_cast<size_t>(blocksPerRow()) * size_.y() * size_.z(); }
 
   size_t linearIndex(int x, int y, int z) const {
     return static_cast<size_t>(x) + static_cast<size_t>(size_.x()) * (static_cast<size_t>(y) + static_cast<size_t>(size_.y()) * z);
@@ -97,9 +106,12 @@ class LocalGrid {
   /// @p free_value, @p gap_radius), then silenceNearOccupied(@p sky_value,
   /// @p sky_radius), the same grid in one pass over the occupied cells and
   /// one over the grid. Returns the zeros set free; a radius of 0 is that
-  /// guard off.
+  /// guard off. @p occupied_blocks, if given, holds numBlocks() flags, set
+  /// (nonzero) for every block that holds an occupied cell (a drawer that
+  /// knows where it put its hits: LineDrawer::hitBlocks()): the guards then
+  /// look only there, not at the whole grid. The same grid and count.
   size_t applySurfaceGuards(float sky_value, int sky_radius, float free_value, int gap_radius,
-                            WorkerPool* pool = nullptr);
+                            WorkerPool* pool = nullptr, const uint8_t* occupied_blocks = nullptr);
 
  private:
   /// What the guards' first pass looks for around each occupied cell.
@@ -109,10 +121,11 @@ class LocalGrid {
     float gap_value;  ///< cells holding it within gap_radius are kept 0
     int gap_radius;
   };
-  /// The first pass, in slabs of z on @p pool's workers; returns the cells it marked.
-  size_t guardNearOccupied(const Guard& guard, WorkerPool* pool);
+  /// The first pass, in slabs of z on @p pool's workers; returns the cells
+  /// it marked. @p occupied_blocks as for applySurfaceGuards().
+  size_t guardNearOccupied(const Guard& guard, WorkerPool* pool, const uint8_t* occupied_blocks = nullptr);
   /// guardNearOccupied() for the occupied cells in the slabs [z_begin, z_end).
-  size_t guardSlabs(const Guard& guard, int z_begin, int z_end);
+  size_t guardSlabs(const Guard& guard, int z_begin, int z_end, const uint8_t* occupied_blocks);
   /// The second pass: the zeros left become @p free_value, the marks 0;
   /// returns the zeros set free.
   size_t settleMarks(float free_value, WorkerPool* pool);
@@ -136,9 +149,6 @@ void releaseIfOversized(std::vector<T>* buffer, size_t needed) {
   if (buffer->capacity() > kBufferReleaseFactor * needed && buffer->capacity() > kKeptBufferElements)
     std::vector<T>().swap(*buffer);
 }
-
-/// Cells tested at once by blockHasInformation().
-constexpr int kInformationBlock = 16;
 
 /// True if one of the kInformationBlock cells from @p cells holds
 /// information: known (not LocalGrid::kUnknown) and not 0. Skips the empty

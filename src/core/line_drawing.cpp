@@ -206,6 +206,15 @@ LineDrawer::RayGrid LineDrawer::rayGrid(const Eigen::Vector3d& W_origin, LocalGr
   return g;
 }
 
+LineDrawer::RayGrid LineDrawer::imageGrid(const Eigen::Vector3d& W_origin, LocalGrid* grid) {
+  RayGrid g = rayGrid(W_origin, grid);
+  releaseIfOversized(&hit_blocks_, grid->numBlocks());
+  hit_blocks_.assign(grid->numBlocks(), 0);
+  g.hit_blocks = hit_blocks_.data();
+  g.blocks_per_row = grid->blocksPerRow();
+  return g;
+}
+
 namespace {
 
 /// The walk of the segment [t_begin, t_end] of the ray g.g0 + t·W_dir (t in cells).
@@ -259,12 +268,16 @@ STEREO_OCCUPANCY_INLINE uint64_t drawEndCell(const Grid& g, const Eigen::Vector3
 template <class Grid>
 STEREO_OCCUPANCY_INLINE uint64_t drawHitAt(const Grid& g, const Eigen::Vector3d& W_point, float hit_log_odds) {
   int64_t index = 0;
+  int cell[3];
   for (int i = 0; i < 3; ++i) {
-    const int cell = floorToInt(W_point[i] * g.inv_c) - g.origin_index[i];
-    if (cell < 0 || cell >= g.size[i]) return 0;
-    index += cell * g.stride[i];
+    cell[i] = floorToInt(W_point[i] * g.inv_c) - g.origin_index[i];
+    if (cell[i] < 0 || cell[i] >= g.size[i]) return 0;
+    index += cell[i] * g.stride[i];
   }
   drawCell(g.data, index, hit_log_odds);
+  if (g.hit_blocks)  // the cell's block, as LocalGrid::numBlocks() numbers them
+    g.hit_blocks[(cell[1] + int64_t{cell[2]} * g.size[1]) * g.blocks_per_row +
+                 static_cast<unsigned>(cell[0]) / kInformationBlock] = 1;
   return 1;
 }
 
@@ -447,16 +460,23 @@ void LineDrawer::drawParts(size_t parts, const RayGrid& g, LocalGrid* grid, Draw
     return;
   }
   if (worker_grids_.size() < workers - 1) worker_grids_.resize(workers - 1);
+  if (worker_hit_blocks_.size() < workers - 1) worker_hit_blocks_.resize(workers - 1);
   for (unsigned w = 1; w < workers; ++w) {
     releaseIfOversized(&worker_grids_[w - 1], grid->numCells());  // after one rare huge grid
     worker_grids_[w - 1].resize(grid->numCells(), LocalGrid::kUnknown);
+    if (!g.hit_blocks) continue;
+    releaseIfOversized(&worker_hit_blocks_[w - 1], grid->numBlocks());
+    worker_hit_blocks_[w - 1].assign(grid->numBlocks(), 0);
   }
   std::vector<PerWorker<DrawStatistics>> worker_stats(workers);
   std::vector<PerWorker<char>> used(workers);
   try {
     pool_->run(parts, [&](size_t part, unsigned w) {
       RayGrid mine = g;
-      if (w > 0) mine.data = worker_grids_[w - 1].data();
+      if (w > 0) {
+        mine.data = worker_grids_[w - 1].data();
+        if (g.hit_blocks) mine.hit_blocks = worker_hit_blocks_[w - 1].data();
+      }
       used[w].value = 1;
       draw_part(part, mine, &worker_stats[w].value);
     });
@@ -466,6 +486,10 @@ void LineDrawer::drawParts(size_t parts, const RayGrid& g, LocalGrid* grid, Draw
   }
   for (const PerWorker<DrawStatistics>& s : worker_stats) addTo(s.value, stats);
   mergeWorkerGrids(used, grid);
+  if (!g.hit_blocks) return;
+  for (unsigned w = 1; w < workers; ++w)
+    if (used[w].value)
+      for (size_t b = 0; b < worker_hit_blocks_[w - 1].size(); ++b) g.hit_blocks[b] |= worker_hit_blocks_[w - 1][b];
 }
 
 unsigned LineDrawer::workersFor(const LocalGrid& grid) const {
@@ -529,7 +553,7 @@ void LineDrawer::drawImage(const cv::Mat& disparity, const Eigen::Isometry3d& T_
   const Eigen::Matrix3d R_W_C = T_W_C.linear();
   stats->coordinate_transfers += 1;  // the camera centre
   // One part per image row.
-  drawParts(disparity.rows, rayGrid(T_W_C.translation(), grid), grid, stats,
+  drawParts(disparity.rows, imageGrid(T_W_C.translation(), grid), grid, stats,
             [&](size_t y, const RayGrid& g, DrawStatistics* part_stats) {
               const float* row = disparity.ptr<float>(static_cast<int>(y));
               for (int x = 0; x < disparity.cols; ++x) {
@@ -550,12 +574,12 @@ void LineDrawer::drawImage(const cv::Mat& disparity, const Eigen::Isometry3d& T_
 
 LineDrawer::Descent LineDrawer::descent(const DisparityPyramid& min_pyramid, const DisparityPyramid* max_pyramid,
                                         const DisparityBlockBound* bound, const Eigen::Isometry3d& T_W_C,
-                                        LocalGrid* grid, DrawStatistics* stats) const {
+                                        LocalGrid* grid, DrawStatistics* stats) {
   return Descent{min_pyramid,
                  max_pyramid,
                  bound,
                  T_W_C,
-                 rayGrid(T_W_C.translation(), grid),
+                 imageGrid(T_W_C.translation(), grid),
                  table_.freeProfile(),
                  grid->resolution() * camera_.config().focal_length_px,
                  stats};

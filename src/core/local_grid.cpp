@@ -58,16 +58,17 @@ size_t LocalGrid::freeZerosAwayFromOccupied(float free_value, int radius, Worker
 }
 
 size_t LocalGrid::applySurfaceGuards(float sky_value, int sky_radius, float free_value, int gap_radius,
-                                     WorkerPool* pool) {
-  if (gap_radius <= 0) {
-    silenceNearOccupied(sky_value, sky_radius, pool);
+                                     WorkerPool* pool, const uint8_t* occupied_blocks) {
+  if (gap_radius <= 0) {  // the sky guard alone, as silenceNearOccupied()
+    if (sky_radius > 0 && sky_value != 0.0f)
+      guardNearOccupied({sky_value, sky_radius, kNoValue, 0}, pool, occupied_blocks);
     return 0;
   }
-  guardNearOccupied({sky_radius > 0 ? sky_value : kNoValue, sky_radius, 0.0f, gap_radius}, pool);
+  guardNearOccupied({sky_radius > 0 ? sky_value : kNoValue, sky_radius, 0.0f, gap_radius}, pool, occupied_blocks);
   return settleMarks(free_value, pool);
 }
 
-size_t LocalGrid::guardNearOccupied(const Guard& guard, WorkerPool* pool) {
+size_t LocalGrid::guardNearOccupied(const Guard& guard, WorkerPool* pool, const uint8_t* occupied_blocks) {
   const int radius = std::max(guard.sky_radius, guard.gap_radius);
   const unsigned workers = pool ? pool->size() : 1;
   // Two chunks of slabs per worker, each at least 2·radius + 1 thick: the
@@ -79,20 +80,20 @@ size_t LocalGrid::guardNearOccupied(const Guard& guard, WorkerPool* pool) {
   const int chunk_slabs = std::max(min_slabs, (size_.z() + 2 * static_cast<int>(workers) - 1) /
                                                   (2 * static_cast<int>(workers)));
   const int chunks = (size_.z() + chunk_slabs - 1) / chunk_slabs;
-  if (workers == 1 || chunks < 2) return guardSlabs(guard, 0, size_.z());
+  if (workers == 1 || chunks < 2) return guardSlabs(guard, 0, size_.z(), occupied_blocks);
   std::vector<size_t> marked(static_cast<size_t>(chunks), 0);
   for (int parity = 0; parity < 2; ++parity)
     pool->run(static_cast<size_t>(chunks - parity + 1) / 2, [&](size_t i, unsigned) {
       const int chunk = 2 * static_cast<int>(i) + parity;
       const int z_begin = chunk * chunk_slabs;
-      marked[chunk] = guardSlabs(guard, z_begin, std::min(size_.z(), z_begin + chunk_slabs));
+      marked[chunk] = guardSlabs(guard, z_begin, std::min(size_.z(), z_begin + chunk_slabs), occupied_blocks);
     });
   size_t total = 0;
   for (size_t n : marked) total += n;
   return total;
 }
 
-size_t LocalGrid::guardSlabs(const Guard& guard, int z_begin, int z_end) {
+size_t LocalGrid::guardSlabs(const Guard& guard, int z_begin, int z_end, const uint8_t* occupied_blocks) {
   const int radius = std::max(guard.sky_radius, guard.gap_radius);
   // The sky guard's cells become 0 at once (nothing else reads them); the
   // gap's zeros near a hit are marked, so that settleMarks() can tell them
@@ -131,19 +132,40 @@ size_t LocalGrid::guardSlabs(const Guard& guard, int z_begin, int z_end) {
         }
       }
   };
+  // The runs of occupied cells in the block of row (y, z) from x_begin, cut
+  // at its end (the union of the pieces' neighbourhoods is the run's).
+  auto markBlock = [&](int x_begin, int y, int z) {
+    const float* row = &data_[linearIndex(0, y, z)];
+    const int x_end = std::min(size_.x(), x_begin + kInformationBlock);
+    for (int x = x_begin; x < x_end; ++x) {
+      if (!(row[x] > 0.0f)) continue;
+      const int x0 = x;
+      while (x + 1 < x_end && row[x + 1] > 0.0f) ++x;  // marks are never > 0: the run stays
+      markAroundRun(x0, x, y, z);
+    }
+  };
+  const int blocks_per_row = blocksPerRow();
+  if (occupied_blocks) {  // the drawer's flags: a few thousand of the grid's blocks
+    const size_t first = static_cast<size_t>(z_begin) * size_.y() * blocks_per_row;
+    const size_t last = static_cast<size_t>(z_end) * size_.y() * blocks_per_row;
+    for (size_t b = first; b < last; ++b) {
+      uint64_t eight;  // most flags are 0: eight at a time
+      if (b % 8 == 0 && b + 8 <= last && (std::memcpy(&eight, occupied_blocks + b, 8), eight == 0)) {
+        b += 7;
+        continue;
+      }
+      if (!occupied_blocks[b]) continue;
+      const size_t row = b / blocks_per_row;
+      markBlock(static_cast<int>(b % blocks_per_row) * kInformationBlock, static_cast<int>(row % size_.y()),
+                static_cast<int>(row / size_.y()));
+    }
+    return marked;
+  }
   for (int z = z_begin; z < z_end; ++z)
     for (int y = 0; y < size_.y(); ++y) {
       const float* row = &data_[linearIndex(0, y, z)];
-      for (int x = 0; x < size_.x(); ++x) {
-        if (x % kInformationBlock == 0 && x + kInformationBlock <= size_.x() && !blockHasOccupied(row + x)) {
-          x += kInformationBlock - 1;  // nothing occupied in these 16 cells
-          continue;
-        }
-        if (!(row[x] > 0.0f)) continue;
-        const int x0 = x;
-        while (x + 1 < size_.x() && row[x + 1] > 0.0f) ++x;  // marks are never > 0: the run stays
-        markAroundRun(x0, x, y, z);
-      }
+      for (int x = 0; x < size_.x(); x += kInformationBlock)
+        if (x + kInformationBlock > size_.x() || blockHasOccupied(row + x)) markBlock(x, y, z);
     }
   return marked;
 }

@@ -578,6 +578,40 @@ TEST(SurfaceProfile, SpansDrawTheDescentsOccupiedCellsWritingFewer) {
   }
 }
 
+// The lines flag the blocks where they put their hits (LineDrawer::
+// hitBlocks()), and the sky guard looks only there: the grid is the one a
+// guard over the whole grid gives, for each line algorithm, on one thread
+// and on two, where the guard silences about two hundred sky cells.
+TEST(SurfaceProfile, SkyGuardOverTheHitBlocksIsTheGuardOverTheGrid) {
+  SyntheticScene scene;
+  scene.addBox({-5.0, -40.0, -1.0}, {60.0, 40.0, 0.0});  // the ground
+  scene.addBox({20.1, -20.0, -5.0}, {22.0, 20.0, 5.0});  // a wall, the sky above it
+  scene.addBox({14.9, -0.1, 0.0}, {15.1, 0.1, 4.0});     // a post before it
+  const Eigen::Isometry3d T_W_C = lookingAlongX({0.0, 0.0, 3.0}, 0.1, 0.05);
+  const cv::Mat disparity = renderDisparity(scene, StereoCameraModel(StereoCameraConfig()), T_W_C);
+  for (DrawingAlgorithm algorithm :
+       {DrawingAlgorithm::kLine, DrawingAlgorithm::kLinePyramid, DrawingAlgorithm::kLinePyramidBounded})
+    for (int threads : {1, 2}) {
+      const std::string what = std::string(toString(algorithm)) + ", threads " + std::to_string(threads);
+      DrawingConfig config = surfaceDrawing(algorithm);
+      config.threads = threads;
+      auto drawUnblurred = [&](LocalGrid* grid) {
+        DisparityDrawer drawer(StereoCameraConfig(), config);
+        drawer.prepareGrid(T_W_C, grid);
+        drawer.drawInto(disparity, T_W_C, grid);
+      };
+      LocalGrid guarded, expected;
+      drawUnblurred(&guarded);
+      config.sensor_model.sky_guard_cells = 0;  // unguarded, then guarded over the whole grid
+      drawUnblurred(&expected);
+      const LogOddsTable table(InverseSensorModel(config.sensor_model), kCell);
+      const size_t silenced = expected.silenceNearOccupied(table.skyLogOdds(), 1);
+      EXPECT_GT(silenced, 100u) << what;
+      ASSERT_EQ(guarded.size(), expected.size()) << what;
+      EXPECT_EQ(std::memcmp(guarded.data(), expected.data(), expected.numCells() * sizeof(float)), 0) << what;
+    }
+}
+
 // The hole test walks a span's leaves by their largest disparity. The order
 // by rank (up to kRankOrderedKeys leaves) and the insertion sort above it
 // are a stable sort's order, also where leaves share a disparity (the
