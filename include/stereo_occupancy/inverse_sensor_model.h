@@ -4,6 +4,7 @@
 /// section IV, eqs. 8-11) and the lookup table that serves it to the drawing
 /// algorithms.
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -238,6 +239,10 @@ class LogOddsTable {
   /// plus this a measurement says nothing [m].
   float tailOf(float delta_l_m) const { return static_cast<float>(0.5 * cell_size_m_) + tail_sigmas_ * delta_l_m; }
 
+  /// profile(l_p, Δl).l_p_m + front_m without the rest of the profile: up to
+  /// this range the measurement's ray is plain free space [m].
+  float frontRange(float l_p_m, float delta_l_m) const { return l_p_m + frontOf(usableDeltaL(delta_l_m)); }
+
   double cellSize() const { return cell_size_m_; }
   float freeLogOdds() const { return free_log_odds_; }
   /// RangeProfile::hit_log_odds of every measured profile: log-odds of p_hit for kSurface, else 0.
@@ -248,6 +253,17 @@ class LogOddsTable {
   float skyLogOdds() const { return sky_log_odds_; }
 
  private:
+  /// Δl as a profile takes it: within [kMinDeltaL, kMaxDeltaL], NaN as kMaxDeltaL.
+  static float usableDeltaL(float delta_l_m) {
+    // A disparity near the matcher's largest at a very short range gives a Δl
+    // that float rounds to 0, a hostile camera one of inf: the table's samples
+    // per metre and the window's ends must stay finite (NaN fails both tests).
+    delta_l_m = std::clamp(delta_l_m, kMinDeltaL, kMaxDeltaL);
+    return delta_l_m >= kMinDeltaL ? delta_l_m : kMaxDeltaL;
+  }
+  /// RangeProfile::front_m for a usable Δl [m].
+  float frontOf(float delta_l_m) const { return -static_cast<float>(0.5 * cell_size_m_) - kFrontSigmas * delta_l_m; }
+
   double cell_size_m_;
   float tail_sigmas_;  ///< InverseSensorModelConfig::tail_sigmas, at most kTailSigmas
   float k_over_sqrt_2pi_;
@@ -285,6 +301,13 @@ inline MeasuredRange measuredRange(const StereoCameraModel& camera, double ray_n
 /// measuresRange() holds; @p ray_norm as for measuredRange().
 RangeProfile measuredProfile(const StereoCameraModel& camera, const LogOddsTable& table, double ray_norm,
                              float d_px);
+
+/// measuredProfile()'s l_p_m + front_m alone (LogOddsTable::frontRange()).
+inline float measuredFrontRange(const StereoCameraModel& camera, const LogOddsTable& table, double ray_norm,
+                                float d_px) {
+  const MeasuredRange m = measuredRange(camera, ray_norm, d_px);
+  return table.frontRange(m.l_p_m, m.delta_l_m);
+}
 
 /// measuredProfile(), or free space up to the maximum range (freeProfile())
 /// for a disparity that measures no range.

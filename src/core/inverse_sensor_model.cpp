@@ -109,11 +109,7 @@ LogOddsTable::LogOddsTable(const InverseSensorModel& model, double cell_size_m)
 }
 
 RangeProfile LogOddsTable::profile(float l_p_m, float delta_l_m) const {
-  // A disparity near the matcher's largest at a very short range gives a Δl
-  // that float rounds to 0, a hostile camera one of inf: the table's samples
-  // per metre and the window's ends must stay finite (NaN fails both tests).
-  delta_l_m = std::clamp(delta_l_m, kMinDeltaL, kMaxDeltaL);
-  if (!(delta_l_m >= kMinDeltaL)) delta_l_m = kMaxDeltaL;
+  delta_l_m = usableDeltaL(delta_l_m);
   RangeProfile p;
   // Height of the peak above 0.5 (eq. 9), capped at p_max - 0.5.
   const float inv_delta_l = 1.0f / delta_l_m;
@@ -126,7 +122,7 @@ RangeProfile LogOddsTable::profile(float l_p_m, float delta_l_m) const {
   p.l_p_m = l_p_m;
   p.samples_per_m = kSamplesPerSigma * inv_delta_l;
   p.half_cell_m = static_cast<float>(0.5 * cell_size_m_);
-  p.front_m = -p.half_cell_m - kFrontSigmas * delta_l_m;
+  p.front_m = frontOf(delta_l_m);
   p.row_origin_m = -kFrontSigmas * delta_l_m;
   p.tail_m = tailOf(delta_l_m);
   p.free_log_odds = free_log_odds_;

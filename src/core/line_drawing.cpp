@@ -666,9 +666,9 @@ void LineDrawer::descendBounded(const Descent& s, int level, int x, int y, doubl
   // them, its children's lines start at the depth where it ends.
   const Eigen::Vector3d C_ray = blockRay(level, x, y);  // z = 1
   const double norm = C_ray.norm();
-  const RangeProfile nearest = profileOf(s, norm, d_max);
-  const double z_shared = std::min(s.cell_f_m_px * powerOfTwo(-level),
-                                   static_cast<double>(nearest.l_p_m + nearest.front_m) / norm);
+  const float nearest_front_m = measuresRange(camera_, d_max) ? measuredFrontRange(camera_, table_, norm, d_max)
+                                                              : s.free_profile.l_p_m + s.free_profile.front_m;
+  const double z_shared = std::min(s.cell_f_m_px * powerOfTwo(-level), static_cast<double>(nearest_front_m) / norm);
   if (z_shared > z_begin) {
     ++s.stats->coordinate_transfers;
     s.stats->grid_cells_drawn +=

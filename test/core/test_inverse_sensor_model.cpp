@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <random>
 
@@ -136,6 +137,21 @@ TEST(LogOddsTable, HugeOrUndefinedRangeUncertaintyStaysFinite) {
     EXPECT_TRUE(std::isfinite(p.front_m) && std::isfinite(p.row_origin_m) && std::isfinite(p.tail_m)) << dl;
     for (float l : {0.0f, 10.0f, 200.0f}) EXPECT_EQ(p.at(l), p.free_log_odds) << dl << " at " << l;
   }
+}
+
+// The bounded descent asks only where a measurement's free space ends:
+// frontRange() is the whole profile's l_p_m + front_m, bit for bit, for
+// ordinary, tiny, huge and undefined Δl.
+TEST(LogOddsTable, FrontRangeIsTheProfilesFront) {
+  const LogOddsTable table(fig1Model(), 0.25);
+  const float inf = std::numeric_limits<float>::infinity();
+  for (float l_p : {0.6f, 10.0f, 24.9f, 2.9e38f, inf})
+    for (float dl : {0.0f, 1e-7f, 0.01f, static_cast<float>(deltaL(10.0)), 3.0f, 1e30f, inf,
+                     std::numeric_limits<float>::quiet_NaN()}) {
+      const RangeProfile p = table.profile(l_p, dl);
+      const float expected = p.l_p_m + p.front_m, front = table.frontRange(l_p, dl);
+      EXPECT_EQ(std::memcmp(&front, &expected, sizeof front), 0) << l_p << " " << dl << ": " << front;
+    }
 }
 
 TEST(InverseSensorModelConfig, Validation) {
