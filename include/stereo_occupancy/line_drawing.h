@@ -73,8 +73,9 @@ class LineDrawer {
   }
   /// After drawImage(), drawPyramid() or drawPyramidBounded(): one flag per
   /// block of the grid drawn (LocalGrid::numBlocks()), nonzero where a line
-  /// put its point hit. With the surface profile, whose table holds no
-  /// occupied value, these are the blocks of all the grid's occupied cells
+  /// put its point hit (empty without point hits: the paper's profile).
+  /// With the surface profile, whose table holds no occupied value, these
+  /// are the blocks of all the grid's occupied cells
   /// (LocalGrid::applySurfaceGuards() need look nowhere else).
   const std::vector<uint8_t>& hitBlocks() const { return hit_blocks_; }
   /// Pyramid blocks per worker a pyramid's descent is split into: enough to share the work evenly.

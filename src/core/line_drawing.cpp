@@ -208,6 +208,10 @@ LineDrawer::RayGrid LineDrawer::rayGrid(const Eigen::Vector3d& W_origin, LocalGr
 
 LineDrawer::RayGrid LineDrawer::imageGrid(const Eigen::Vector3d& W_origin, LocalGrid* grid) {
   RayGrid g = rayGrid(W_origin, grid);
+  if (!(table_.hitLogOdds() > 0.0f)) {  // no point hits (the paper's profile): nothing to flag
+    hit_blocks_.clear();
+    return g;
+  }
   releaseIfOversized(&hit_blocks_, grid->numBlocks());
   hit_blocks_.assign(grid->numBlocks(), 0);
   g.hit_blocks = hit_blocks_.data();
