@@ -466,7 +466,9 @@ TEST(SurfaceProfile, BothGuardsAtOnceAreTheGapGuardThenTheSkyGuard) {
 // Both guards against a plain reference on random grids with runs of
 // adjacent hits in a row (the guard visits a run's neighbourhood once):
 // sky within sky_radius of a hit becomes 0, a zero within gap_radius of a
-// hit stays 0, every other zero becomes free; radii that differ too.
+// hit stays 0, every other zero becomes free; radii that differ too, and
+// the sky guard alone (the default). With the blocks that hold hits
+// flagged (as the lines flag them) the guards look only there: the same.
 TEST(SurfaceProfile, BothGuardsMatchAPlainReferenceAroundRunsOfHits) {
   const float free = -0.85f, sky = std::nextafter(free, -1.0f), hit = 0.9f;
   const float kinds[] = {LocalGrid::kUnknown, sky, sky, free, 0.0f, 0.0f};
@@ -494,28 +496,40 @@ TEST(SurfaceProfile, BothGuardsMatchAPlainReferenceAroundRunsOfHits) {
                 best = std::min(best, std::max({std::abs(h - x), std::abs(j - y), std::abs(k - z)}));
               }
   auto nearestHit = [&](int x, int y, int z) { return nearest[drawn.linearIndex(x, y, z)]; };
-  for (const auto& [sky_radius, gap_radius] : {std::pair{1, 2}, std::pair{2, 1}, std::pair{1, 1}, std::pair{2, 2}}) {
+  std::vector<uint8_t> hit_blocks(drawn.numBlocks(), 0);  // 3 blocks a row, the last of 5 cells
+  for (int z = 0; z < n.z(); ++z)
+    for (int y = 0; y < n.y(); ++y)
+      for (int x = 0; x < n.x(); ++x)
+        if (drawn.at(x, y, z) == hit)
+          hit_blocks[(static_cast<size_t>(z) * n.y() + y) * drawn.blocksPerRow() + x / kInformationBlock] = 1;
+  for (const auto& [sky_radius, gap_radius] :
+       {std::pair{1, 2}, std::pair{2, 1}, std::pair{1, 1}, std::pair{2, 2}, std::pair{1, 0}, std::pair{2, 0}}) {
     LocalGrid expected = drawn;
-    size_t freed = 0;
+    size_t freed = 0, silenced = 0;
     for (int z = 0; z < n.z(); ++z)
       for (int y = 0; y < n.y(); ++y)
         for (int x = 0; x < n.x(); ++x) {
           float& cell = expected.at(x, y, z);
-          if (cell == sky && nearestHit(x, y, z) <= sky_radius) cell = 0.0f;
-          if (drawn.at(x, y, z) == 0.0f && nearestHit(x, y, z) > gap_radius) {
+          if (cell == sky && nearestHit(x, y, z) <= sky_radius) {
+            cell = 0.0f;
+            ++silenced;
+          }
+          if (gap_radius > 0 && drawn.at(x, y, z) == 0.0f && nearestHit(x, y, z) > gap_radius) {
             cell = free;
             ++freed;
           }
         }
-    ASSERT_GT(freed, 0u);
-    for (unsigned threads : {1u, 2u}) {
-      WorkerPool pool(threads);
-      LocalGrid both = drawn;
-      const std::string what = "sky " + std::to_string(sky_radius) + " gap " + std::to_string(gap_radius) +
-                               " threads " + std::to_string(threads);
-      EXPECT_EQ(both.applySurfaceGuards(sky, sky_radius, free, gap_radius, &pool), freed) << what;
-      EXPECT_EQ(std::memcmp(both.data(), expected.data(), expected.numCells() * sizeof(float)), 0) << what;
-    }
+    ASSERT_GT(silenced, 0u);
+    ASSERT_EQ(freed > 0, gap_radius > 0);
+    for (unsigned threads : {1u, 2u})
+      for (const uint8_t* flags : {static_cast<const uint8_t*>(nullptr), std::as_const(hit_blocks).data()}) {
+        WorkerPool pool(threads);
+        LocalGrid both = drawn;
+        const std::string what = "sky " + std::to_string(sky_radius) + " gap " + std::to_string(gap_radius) +
+                                 " threads " + std::to_string(threads) + (flags ? " flags" : "");
+        EXPECT_EQ(both.applySurfaceGuards(sky, sky_radius, free, gap_radius, &pool, flags), freed) << what;
+        EXPECT_EQ(std::memcmp(both.data(), expected.data(), expected.numCells() * sizeof(float)), 0) << what;
+      }
   }
 }
 
