@@ -149,10 +149,13 @@ size_t LocalGrid::guardSlabs(const Guard& guard, int z_begin, int z_end, const u
     const size_t first = static_cast<size_t>(z_begin) * size_.y() * blocks_per_row;
     const size_t last = static_cast<size_t>(z_end) * size_.y() * blocks_per_row;
     for (size_t b = first; b < last; ++b) {
-      uint64_t eight;  // most flags are 0: eight at a time
-      if (b % 8 == 0 && b + 8 <= last && (std::memcpy(&eight, occupied_blocks + b, 8), eight == 0)) {
-        b += 7;
-        continue;
+      if (b % 8 == 0 && b + 8 <= last) {  // most flags are 0: eight at a time
+        uint64_t eight;
+        std::memcpy(&eight, occupied_blocks + b, sizeof eight);
+        if (eight == 0) {
+          b += 7;
+          continue;
+        }
       }
       if (!occupied_blocks[b]) continue;
       const size_t row = b / blocks_per_row;
