@@ -92,8 +92,9 @@ class LocalGrid {
   /// returns how many (none for @p value 0). With value = the sky's
   /// log-odds: a ray that measured no range says nothing next to what the
   /// image did measure. With a @p pool, slabs of z on its workers: the same
-  /// grid and count.
-  size_t silenceNearOccupied(float value, int radius, WorkerPool* pool = nullptr);
+  /// grid and count. @p occupied_blocks as for applySurfaceGuards().
+  size_t silenceNearOccupied(float value, int radius, WorkerPool* pool = nullptr,
+                             const uint8_t* occupied_blocks = nullptr);
 
   /// Sets the cells holding 0 (no information) that lie farther than
   /// @p radius cells (Chebyshev) from every occupied cell to @p free_value;
@@ -123,7 +124,7 @@ class LocalGrid {
   };
   /// The first pass, in slabs of z on @p pool's workers; returns the cells
   /// it marked. @p occupied_blocks as for applySurfaceGuards().
-  size_t guardNearOccupied(const Guard& guard, WorkerPool* pool, const uint8_t* occupied_blocks = nullptr);
+  size_t guardNearOccupied(const Guard& guard, WorkerPool* pool, const uint8_t* occupied_blocks);
   /// guardNearOccupied() for the occupied cells in the slabs [z_begin, z_end).
   size_t guardSlabs(const Guard& guard, int z_begin, int z_end, const uint8_t* occupied_blocks);
   /// The second pass: the zeros left become @p free_value, the marks 0;

@@ -176,13 +176,10 @@ DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::
   }
   if (config_.sensor_model.profile == SensorProfile::kSurface) {
     // The lines flag where they put their hits, the surface profile's only occupied cells.
-    const bool drew_lines = config_.algorithm == DrawingAlgorithm::kLine ||
-                            config_.algorithm == DrawingAlgorithm::kLinePyramid ||
-                            config_.algorithm == DrawingAlgorithm::kLinePyramidBounded;
     const std::vector<uint8_t>& hit_blocks = line_drawer_.hitBlocks();
     grid->applySurfaceGuards(table_.skyLogOdds(), config_.sensor_model.sky_guard_cells, table_.freeLogOdds(),
                              config_.sensor_model.gap_guard_cells, workers_.get(),
-                             drew_lines && hit_blocks.size() == grid->numBlocks() ? hit_blocks.data() : nullptr);
+                             drawsLines() && hit_blocks.size() == grid->numBlocks() ? hit_blocks.data() : nullptr);
   }
   if (config_.count_different_cells) stats.different_grid_cells = grid->countKnown();
   return stats;

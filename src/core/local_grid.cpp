@@ -45,23 +45,22 @@ constexpr float kKeepMark = -std::numeric_limits<float>::min();
 constexpr float kNoValue = std::numeric_limits<float>::quiet_NaN();
 }  // namespace
 
-size_t LocalGrid::silenceNearOccupied(float value, int radius, WorkerPool* pool) {
+size_t LocalGrid::silenceNearOccupied(float value, int radius, WorkerPool* pool, const uint8_t* occupied_blocks) {
   // A zero silenced is the zero it was: counted, it would be counted again by each run that reaches it.
   if (radius <= 0 || value == 0.0f) return 0;
-  return guardNearOccupied({value, radius, kNoValue, 0}, pool);
+  return guardNearOccupied({value, radius, kNoValue, 0}, pool, occupied_blocks);
 }
 
 size_t LocalGrid::freeZerosAwayFromOccupied(float free_value, int radius, WorkerPool* pool) {
   if (radius <= 0) return 0;
-  guardNearOccupied({kNoValue, 0, 0.0f, radius}, pool);
+  guardNearOccupied({kNoValue, 0, 0.0f, radius}, pool, nullptr);
   return settleMarks(free_value, pool);
 }
 
 size_t LocalGrid::applySurfaceGuards(float sky_value, int sky_radius, float free_value, int gap_radius,
                                      WorkerPool* pool, const uint8_t* occupied_blocks) {
-  if (gap_radius <= 0) {  // the sky guard alone, as silenceNearOccupied()
-    if (sky_radius > 0 && sky_value != 0.0f)
-      guardNearOccupied({sky_value, sky_radius, kNoValue, 0}, pool, occupied_blocks);
+  if (gap_radius <= 0) {
+    silenceNearOccupied(sky_value, sky_radius, pool, occupied_blocks);
     return 0;
   }
   guardNearOccupied({sky_radius > 0 ? sky_value : kNoValue, sky_radius, 0.0f, gap_radius}, pool, occupied_blocks);
