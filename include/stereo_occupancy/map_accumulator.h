@@ -108,8 +108,9 @@ class MapAccumulator {
 
   /// Replaces the map by the one in @p path (.bt: occupied / free, .ot: with
   /// log-odds), clamped to this map's bounds. The number of updates starts
-  /// at 0. @throws std::runtime_error if the file cannot be read or is of
-  /// another resolution; the map is then unchanged.
+  /// at 0. The file is checked before it is read (readOcTreeFile).
+  /// @throws std::runtime_error if the file cannot be read, is damaged,
+  /// truncated or of another resolution; the map is then unchanged.
   void load(const std::string& path);
 
   /// Leaves no occupied cell in the box [W_min, W_max] (metres, in the map's

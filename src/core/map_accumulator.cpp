@@ -137,16 +137,7 @@ void MapAccumulator::reset() {
 }
 
 void MapAccumulator::load(const std::string& path) {
-  std::unique_ptr<octomap::AbstractOcTree> read;
-  if (path.size() > 3 && path.compare(path.size() - 3, 3, ".bt") == 0) {
-    auto binary = std::make_unique<octomap::OcTree>(config_.resolution_m);
-    if (!binary->readBinary(path)) throw std::runtime_error("cannot read '" + path + "' as a binary OctoMap (.bt)");
-    read = std::move(binary);
-  } else {
-    read.reset(octomap::AbstractOcTree::read(path));
-  }
-  const auto* file = dynamic_cast<const octomap::OcTree*>(read.get());
-  if (!file) throw std::runtime_error("cannot read '" + path + "' as an OcTree (.bt or .ot)");
+  const std::unique_ptr<octomap::OcTree> file = readOcTreeFile(path);
   if (std::abs(file->getResolution() - config_.resolution_m) > 1e-9 * config_.resolution_m)
     throw std::runtime_error("'" + path + "' has " + std::to_string(file->getResolution()) +
                              " m cells, the map " + std::to_string(config_.resolution_m) + " m");

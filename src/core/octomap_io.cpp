@@ -5,12 +5,16 @@
 #include <signal.h>
 #include <unistd.h>
 
+#include <array>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <functional>
 #include <ostream>
+#include <sstream>
 #include <streambuf>
 #include <stdexcept>
 #include <vector>
@@ -23,6 +27,154 @@ std::string directoryOf(const std::string& path) {
   return slash == std::string::npos ? "." : (slash == 0 ? "/" : path.substr(0, slash));
 }
 }  // namespace
+
+namespace {
+
+/// OctoMap's keys have 16 bits: leaves lie at depth 16 at the deepest.
+constexpr unsigned kMaxTreeDepth = 16;
+
+/// The first lines OctoMap writes (AbstractOcTree::write, writeBinaryConst).
+constexpr char kFullFileLine[] = "# Octomap OcTree file";
+constexpr char kBinaryFileLine[] = "# Octomap OcTree binary file";
+/// A header longer than this is not OctoMap's (it writes about 120 bytes).
+constexpr size_t kMaxHeaderBytes = 4096;
+
+[[noreturn]] void refuse(const std::string& why, size_t at) {
+  throw std::runtime_error(why + " at byte " + std::to_string(at));
+}
+
+/// The children a node of the stream announces: for kFull the bit mask
+/// (child i follows if bit i is set), for kBinary the two-bit codes
+/// (01 occupied leaf, 10 free leaf, 11 inner node that follows, 00 none).
+struct Children {
+  unsigned inner = 0;  ///< children whose own records follow in the stream
+  unsigned leaves = 0;  ///< kBinary: children that are leaves, told by their codes alone
+};
+
+}  // namespace
+
+OcTreeDataShape checkOcTreeData(const char* data, size_t size, OcTreeEncoding encoding) {
+  OcTreeDataShape shape;
+  if (size == 0) return shape;
+  const bool full = encoding == OcTreeEncoding::kFull;
+  const size_t record = full ? sizeof(float) + 1 : 2;
+  // pending[d]: records still to come of the children of the node at depth d.
+  std::array<unsigned, kMaxTreeDepth + 1> pending{};
+  unsigned depth = 0;  // of the record read next
+  size_t at = 0;
+  shape.nodes = 1;  // the root; every other node is counted by its parent
+  for (;;) {
+    if (size - at < record) refuse("the tree's data ends inside a node", at);
+    Children children;
+    if (full) {
+      float log_odds;
+      std::memcpy(&log_odds, data + at, sizeof log_odds);
+      if (!std::isfinite(log_odds)) refuse("a node's log-odds is not a finite number", at);
+      const unsigned bits = static_cast<unsigned char>(data[at + sizeof log_odds]);
+      for (unsigned i = 0; i < 8; ++i) children.inner += (bits >> i) & 1u;
+    } else {
+      for (unsigned b = 0; b < 2; ++b) {
+        const unsigned bits = static_cast<unsigned char>(data[at + b]);
+        for (unsigned i = 0; i < 4; ++i) {
+          const unsigned code = (bits >> (2 * i)) & 3u;
+          children.inner += code == 3u;
+          children.leaves += code == 1u || code == 2u;
+        }
+      }
+      if (children.inner + children.leaves == 0) refuse("an inner node without children", at);
+    }
+    // An inner child of a .bt record needs a record of its own one level down.
+    if (children.inner > 0 && depth + (full ? 1 : 2) > kMaxTreeDepth)
+      refuse("a node deeper than OctoMap's " + std::to_string(kMaxTreeDepth) + " levels", at);
+    at += record;
+    shape.nodes += children.inner + children.leaves;
+    shape.leaves += children.leaves;
+    if (full && children.inner == 0) ++shape.leaves;  // a .ot record without children is a leaf
+    pending[depth] = children.inner;
+    // The next record: this node's first child, or the next sibling up the path.
+    while (pending[depth] == 0) {
+      if (depth == 0) {
+        if (at != size) refuse("data after the tree's end (" + std::to_string(size - at) + " bytes)", at);
+        return shape;
+      }
+      --depth;
+    }
+    --pending[depth];
+    ++depth;
+  }
+}
+
+std::unique_ptr<octomap::OcTree> readOcTreeData(const std::string& bytes, OcTreeEncoding encoding,
+                                                double resolution_m) {
+  const OcTreeDataShape shape = checkOcTreeData(bytes.data(), bytes.size(), encoding);
+  auto tree = std::make_unique<octomap::OcTree>(resolution_m);
+  if (bytes.empty()) return tree;
+  std::istringstream in(bytes);
+  const bool read = static_cast<bool>(encoding == OcTreeEncoding::kFull ? tree->readData(in) : tree->readBinaryData(in));
+  if (!read || tree->size() != shape.nodes) throw std::runtime_error("OctoMap could not read the tree's data");
+  return tree;
+}
+
+std::unique_ptr<octomap::OcTree> readOcTreeFile(const std::string& path) {
+  auto fail = [&](const std::string& why) -> std::runtime_error {
+    return std::runtime_error("cannot read '" + path + "' as an OcTree map file (.bt or .ot): " + why);
+  };
+  std::ifstream file(path, std::ios::binary);
+  if (!file) throw fail(std::strerror(errno));
+  std::string bytes((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
+  if (file.bad()) throw fail("read error");
+  // The header, as OctoMap's readers take it: a first line that names the
+  // encoding, then "id", "size", "res" lines (and comments), then "data".
+  size_t at = 0;
+  auto nextLine = [&](std::string* line) {
+    const size_t end = bytes.find('\n', at);
+    if (end == std::string::npos || end >= kMaxHeaderBytes) return false;
+    *line = bytes.substr(at, end - at);
+    at = end + 1;
+    return true;
+  };
+  std::string line;
+  if (!nextLine(&line)) throw fail("no OctoMap header");
+  OcTreeEncoding encoding;
+  if (line.compare(0, sizeof kBinaryFileLine - 1, kBinaryFileLine) == 0)
+    encoding = OcTreeEncoding::kBinary;
+  else if (line.compare(0, sizeof kFullFileLine - 1, kFullFileLine) == 0)
+    encoding = OcTreeEncoding::kFull;
+  else
+    throw fail("it does not start with OctoMap's \"" + std::string(kFullFileLine) + "\" or \"" + kBinaryFileLine +
+               "\" line");
+  std::string id;
+  double resolution_m = 0.0;
+  long long claimed_nodes = -1;
+  for (;;) {
+    if (!nextLine(&line)) throw fail("its header has no \"data\" line");
+    std::istringstream words(line);
+    std::string keyword;
+    words >> keyword;
+    if (keyword == "data") break;
+    if (keyword == "id") words >> id;
+    if (keyword == "res") words >> resolution_m;
+    if (keyword == "size") words >> claimed_nodes;
+  }
+  if (id != "OcTree") throw fail("it holds a " + (id.empty() ? std::string("tree of no id") : id) + ", not an OcTree");
+  if (!std::isfinite(resolution_m) || !(resolution_m > 0.0)) throw fail("its resolution is not a positive number");
+  if (claimed_nodes < 0) throw fail("its header has no node count (\"size\")");
+  bytes.erase(0, at);
+  OcTreeDataShape shape;
+  try {
+    shape = checkOcTreeData(bytes.data(), bytes.size(), encoding);
+  } catch (const std::runtime_error& e) {
+    throw fail(std::string(e.what()) + " of its data (truncated or damaged)");
+  }
+  if (shape.nodes != static_cast<unsigned long long>(claimed_nodes))
+    throw fail("its header claims " + std::to_string(claimed_nodes) + " nodes, its data holds " +
+               std::to_string(shape.nodes) + " (truncated or damaged)");
+  try {
+    return readOcTreeData(bytes, encoding, resolution_m);
+  } catch (const std::runtime_error& e) {
+    throw fail(e.what());
+  }
+}
 
 int removeStaleTemporaries(const std::string& path) {
   const size_t slash = path.rfind('/');

@@ -32,6 +32,9 @@ namespace stereo_occupancy {
 namespace {
 /// At most one warning of a kind in this time [s].
 constexpr double kWarnThrottleS = 5.0;
+/// Without the mission's database, saves write the live map under
+/// <map_name> + this, never over the mission's own files.
+constexpr const char* kLiveOnlySuffix = "_live_only";
 /// A failing periodic save repeats its error at most this often [s].
 constexpr double kSaveErrorThrottleS = 60.0;
 /// Per-update timings kept for the summary at shutdown.
@@ -442,6 +445,10 @@ void OctomapAccumulator::openDatabase() {
     return;
   }
   const size_t tiles = fusion_->mission().store()->tiles().size();
+  const TileStoreStatus status = fusion_->mission().store()->status();
+  if (status.damaged_rows > 0)
+    NODELET_ERROR("%s: %zu damaged tile rows moved to its table damaged_tiles; those tiles start empty (the first: %s)",
+                  path.c_str(), status.damaged_rows, status.first_damage.c_str());
   NODELET_INFO("the mission's tiles are kept in %s (%s, %zu tiles)", path.c_str(), tiles ? "continued" : "new", tiles);
 }
 
@@ -463,6 +470,13 @@ std::vector<std::string> OctomapAccumulator::save(std::unique_lock<std::mutex>& 
     lock.lock();
     if (!error.empty()) throw std::runtime_error(error);
     updates_at_last_save_ = updates;
+  } else if (!database_problem_.empty()) {
+    // The mission's files may hold more than this live map (the database
+    // that could not be opened has the rest): never replaced by it.
+    paths = fusion_->map().save(params_.save_dir, params_.map_name + kLiveOnlySuffix);
+    throw std::runtime_error("the mission's database is not open (" + database_problem_ +
+                             "): wrote only the live map, to " + paths[0] + " and " + paths[1] + "; " +
+                             params_.map_name + ".bt and .ot stay as they were");
   } else {
     paths = fusion_->map().save(params_.save_dir, params_.map_name);
     updates_at_last_save_ = fusion_->map().updates();

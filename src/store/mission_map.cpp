@@ -35,7 +35,12 @@ void MissionMap::attachStore(std::shared_ptr<TileStore> store) {
 void MissionMap::makeResident(const TileIndex& tile) {
   if (!resident_.insert(TileStore::pack(tile)).second) return;
   std::vector<MapAccumulator::Leaf> leaves;
-  if (store_->get(tile, &leaves)) live_.insertLeaves(leaves);
+  try {
+    if (store_->get(tile, &leaves)) live_.insertLeaves(leaves);
+  } catch (const std::runtime_error& e) {
+    // A row damaged since the store opened: the tile starts empty, the row is kept aside.
+    store_->setAside(tile, e.what());
+  }
 }
 
 bool MissionMap::integrate(const GridUpdateView& update, std::string* why) {
@@ -203,11 +208,9 @@ void writeTileRow(const TileRow& row, const std::string& bytes, bool full, doubl
     return;
   }
   if (row.nodes == 1) return;  // a leaf: its parent's bits said all
-  octomap::OcTree tile(resolution_m);
-  tile.setOccupancyThres(occupancy_threshold_prob);
-  std::istringstream in(bytes);
-  if (!tile.readData(in)) throw std::runtime_error("a tile row is not OcTree data");
-  tile.writeBinaryNode(out, tileNode(tile));
+  const std::unique_ptr<octomap::OcTree> tile = readOcTreeData(bytes, OcTreeEncoding::kFull, resolution_m);
+  tile->setOccupancyThres(occupancy_threshold_prob);
+  tile->writeBinaryNode(out, tileNode(*tile));
 }
 
 }  // namespace

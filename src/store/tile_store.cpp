@@ -1,7 +1,9 @@
 #include "stereo_occupancy/store/tile_store.h"
 
 #include <sqlite3.h>
+#include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -10,6 +12,7 @@
 #include <stdexcept>
 
 #include "stereo_occupancy/accumulating_octree.h"
+#include "stereo_occupancy/octomap_io.h"
 
 namespace stereo_occupancy {
 
@@ -34,10 +37,21 @@ std::string serialise(const std::vector<MapAccumulator::Leaf>& leaves, double re
   return out.str();
 }
 
+/// Checks that @p bytes is a tile row: one whole tree (checkOcTreeData)
+/// whose first kTileDepth nodes are the path to the tile, one child each.
+/// @throws std::runtime_error saying what is wrong.
+void checkRow(const std::string& bytes) {
+  checkOcTreeData(bytes.data(), bytes.size(), OcTreeEncoding::kFull);
+  const size_t path_bytes = MapAccumulator::kTileDepth * TileStore::kRowNodeBytes;
+  if (bytes.size() <= path_bytes) throw std::runtime_error("it ends before its tile's node");
+  for (size_t i = 0; i < MapAccumulator::kTileDepth; ++i) {
+    const unsigned bits = static_cast<unsigned char>(bytes[i * TileStore::kRowNodeBytes + sizeof(float)]);
+    if (bits == 0 || (bits & (bits - 1)) != 0) throw std::runtime_error("its path to the tile branches");
+  }
+}
+
 std::vector<MapAccumulator::Leaf> deserialise(const std::string& bytes, double resolution_m) {
-  std::istringstream in(bytes);
-  auto tree = std::make_unique<octomap::OcTree>(resolution_m);
-  if (!tree->readData(in) || in.fail()) throw std::runtime_error("a tile row is not OcTree data");
+  const std::unique_ptr<octomap::OcTree> tree = readOcTreeData(bytes, OcTreeEncoding::kFull, resolution_m);
   std::vector<MapAccumulator::Leaf> leaves;
   leaves.reserve(tree->getNumLeafNodes());
   for (auto it = tree->begin_leafs(), end = tree->end_leafs(); it != end; ++it) {
@@ -48,6 +62,27 @@ std::vector<MapAccumulator::Leaf> deserialise(const std::string& bytes, double r
     leaves.push_back(leaf);
   }
   return leaves;
+}
+
+/// A column's text; @throws std::runtime_error for NULL (another program's table).
+std::string columnText(sqlite3_stmt* stmt, int column, const char* what) {
+  const unsigned char* text = sqlite3_column_text(stmt, column);
+  if (!text) throw std::runtime_error(std::string("its meta table has a NULL ") + what);
+  return reinterpret_cast<const char*>(text);
+}
+
+/// "tile (x, y, z)" for messages.
+std::string tileName(const MapAccumulator::TileIndex& t) {
+  return "tile (" + std::to_string(t.x()) + ", " + std::to_string(t.y()) + ", " + std::to_string(t.z()) + ")";
+}
+
+/// @p text as a cell size [m]; @throws std::runtime_error unless a finite positive number.
+double parseResolution(const std::string& text) {
+  char* end = nullptr;
+  const double value = std::strtod(text.c_str(), &end);
+  if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(value) || !(value > 0.0))
+    throw std::runtime_error("its resolution_m entry '" + text + "' is not a positive number");
+  return value;
 }
 
 /// A prepared statement, finalised on scope exit.
@@ -89,62 +124,173 @@ TileStore::TileIndex TileStore::unpack(uint64_t key) {
                    static_cast<int>(static_cast<int64_t>(key & 0xffff) - kPackOffset));
 }
 
-TileStore::TileStore(const std::string& path, double resolution_m) : path_(path), resolution_m_(resolution_m) {
+TileStore::TileStore(const std::string& path, double resolution_m, Access access)
+    : path_(path), resolution_m_(resolution_m), access_(access) {
   auto fail = [&](const std::string& why) {
     if (db_) sqlite3_close(db_);
     db_ = nullptr;
     throw std::runtime_error("tile database '" + path + "': " + why);
   };
-  if (sqlite3_open_v2(path.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX,
-                      nullptr) != SQLITE_OK)
-    fail(db_ ? sqlite3_errmsg(db_) : "cannot open");
+  const bool read_only = access == Access::kReadOnly;
+  const int flags = (read_only ? SQLITE_OPEN_READONLY : SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE) | SQLITE_OPEN_FULLMUTEX;
+  if (sqlite3_open_v2(path.c_str(), &db_, flags, nullptr) != SQLITE_OK) fail(db_ ? sqlite3_errmsg(db_) : "cannot open");
   try {
     // Exclusive: a second accumulator on the same file would overwrite
-    // tiles it never loaded. WAL: a crash never leaves a half-written row.
-    execute("PRAGMA locking_mode = EXCLUSIVE");
-    execute("PRAGMA journal_mode = WAL");
-    execute("PRAGMA synchronous = NORMAL");
-    if (sqlite3_exec(db_, "BEGIN EXCLUSIVE", nullptr, nullptr, nullptr) != SQLITE_OK)
+    // tiles it never loaded. A reader takes a shared lock, which a database
+    // an accumulator holds refuses (SQLite needs the shared-memory WAL index
+    // to read a WAL database without writing it).
+    if (!read_only) execute("PRAGMA locking_mode = EXCLUSIVE");
+    if (sqlite3_exec(db_, read_only ? "BEGIN; SELECT count(*) FROM sqlite_master" : "BEGIN EXCLUSIVE", nullptr,
+                     nullptr, nullptr) != SQLITE_OK)
       fail(sqlite3_errcode(db_) == SQLITE_BUSY ? "locked: another process has it open"
                                                 : std::string(sqlite3_errmsg(db_)));
-    execute("CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL)");
-    execute("CREATE TABLE IF NOT EXISTS tiles (x INTEGER NOT NULL, y INTEGER NOT NULL, z INTEGER NOT NULL, "
-            "leaves INTEGER NOT NULL, octree BLOB NOT NULL, PRIMARY KEY (x, y, z)) WITHOUT ROWID");
-    std::map<std::string, std::string> meta;
-    {
-      Statement read(db_, "SELECT key, value FROM meta");
-      while (sqlite3_step(read.get()) == SQLITE_ROW)
-        meta[reinterpret_cast<const char*>(sqlite3_column_text(read.get(), 0))] =
-            reinterpret_cast<const char*>(sqlite3_column_text(read.get(), 1));
-    }
-    if (meta.empty() && resolution_m <= 0.0) {
-      fail("not a tile database (no resolution_m)");
-    } else if (meta.empty()) {
-      Statement insert(db_, "INSERT INTO meta (key, value) VALUES (?, ?)");
-      const std::string resolution = std::to_string(resolution_m);
-      for (const auto& kv : {std::make_pair(std::string("format"), std::string(kFormat)),
-                             std::make_pair(std::string("resolution_m"), resolution)}) {
-        sqlite3_bind_text(insert.get(), 1, kv.first.c_str(), -1, SQLITE_TRANSIENT);
-        sqlite3_bind_text(insert.get(), 2, kv.second.c_str(), -1, SQLITE_TRANSIENT);
-        insert.run();
-      }
-    } else if (meta["format"] != kFormat) {
-      fail("not a tile database of this version (format '" + meta["format"] + "')");
-    } else if (resolution_m <= 0.0) {
-      resolution_m_ = std::stod(meta["resolution_m"]);
-    } else if (std::abs(std::stod(meta["resolution_m"]) - resolution_m) > 1e-9 * resolution_m) {
-      fail("its tiles have " + meta["resolution_m"] + " m cells, the map " + std::to_string(resolution_m) + " m");
-    }
+    openTables();  // before anything is written: another program's file stays as it was
     execute("COMMIT");
-    Statement list(db_, "SELECT x, y, z FROM tiles");
-    while (sqlite3_step(list.get()) == SQLITE_ROW)
-      stored_.insert(pack(TileIndex(sqlite3_column_int(list.get(), 0), sqlite3_column_int(list.get(), 1),
-                                        sqlite3_column_int(list.get(), 2))));
-  } catch (const std::runtime_error& e) {
+    if (!read_only) {
+      // WAL: a crash never leaves a half-written row.
+      execute("PRAGMA journal_mode = WAL");
+      execute("PRAGMA synchronous = NORMAL");
+    }
+    checkRows();
+  } catch (const std::exception& e) {  // std::bad_alloc too: the connection must not keep the file locked
     if (!db_) throw;
     fail(e.what());
   }
   writer_ = std::thread([this] { writerLoop(); });
+}
+
+void TileStore::openTables() {
+  std::vector<std::string> tables;
+  {
+    Statement list(db_, "SELECT name FROM sqlite_master WHERE type = 'table'");
+    while (sqlite3_step(list.get()) == SQLITE_ROW) {
+      const unsigned char* name = sqlite3_column_text(list.get(), 0);
+      tables.push_back(name ? reinterpret_cast<const char*>(name) : "");
+    }
+  }
+  const auto has = [&](const char* table) { return std::find(tables.begin(), tables.end(), table) != tables.end(); };
+  if (tables.empty()) {
+    if (resolution_m_ <= 0.0) throw std::runtime_error("not a tile database (empty)");
+    if (access_ == Access::kReadOnly) throw std::runtime_error("not a tile database (empty)");
+    execute("CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL)");
+    execute("CREATE TABLE tiles (x INTEGER NOT NULL, y INTEGER NOT NULL, z INTEGER NOT NULL, "
+            "leaves INTEGER NOT NULL, octree BLOB NOT NULL, PRIMARY KEY (x, y, z)) WITHOUT ROWID");
+    Statement insert(db_, "INSERT INTO meta (key, value) VALUES (?, ?)");
+    const std::string resolution = std::to_string(resolution_m_);
+    for (const auto& kv : {std::make_pair(std::string("format"), std::string(kFormat)),
+                           std::make_pair(std::string("resolution_m"), resolution)}) {
+      sqlite3_bind_text(insert.get(), 1, kv.first.c_str(), -1, SQLITE_TRANSIENT);
+      sqlite3_bind_text(insert.get(), 2, kv.second.c_str(), -1, SQLITE_TRANSIENT);
+      insert.run();
+    }
+    return;
+  }
+  // Another program's file is refused before anything is written to it.
+  if (!has("meta") || !has("tiles")) {
+    std::string names;
+    for (const auto& t : tables) names += (names.empty() ? "" : ", ") + t;
+    throw std::runtime_error("not a tile database (its tables: " + names + ")");
+  }
+  std::map<std::string, std::string> meta;
+  {
+    Statement read(db_, "SELECT key, value FROM meta");
+    while (sqlite3_step(read.get()) == SQLITE_ROW)
+      meta[columnText(read.get(), 0, "key")] = columnText(read.get(), 1, "value");
+  }
+  if (meta["format"] != kFormat) throw std::runtime_error("not a tile database of this version (format '" + meta["format"] + "')");
+  const double stored_m = parseResolution(meta["resolution_m"]);
+  if (resolution_m_ <= 0.0) {
+    resolution_m_ = stored_m;
+  } else if (std::abs(stored_m - resolution_m_) > 1e-9 * resolution_m_) {
+    throw std::runtime_error("its tiles have " + meta["resolution_m"] + " m cells, the map " +
+                             std::to_string(resolution_m_) + " m");
+  }
+  if (access_ == Access::kReadWrite)
+    execute("CREATE TABLE IF NOT EXISTS damaged_tiles (x INTEGER NOT NULL, y INTEGER NOT NULL, z INTEGER NOT NULL, "
+            "octree BLOB, reason TEXT NOT NULL)");
+}
+
+void TileStore::checkRows() {
+  std::vector<std::pair<TileIndex, std::string>> damaged;
+  {
+    Statement list(db_, "SELECT x, y, z, octree FROM tiles");
+    int rc;
+    while ((rc = sqlite3_step(list.get())) == SQLITE_ROW) {
+      const TileIndex tile(sqlite3_column_int(list.get(), 0), sqlite3_column_int(list.get(), 1),
+                           sqlite3_column_int(list.get(), 2));
+      const void* blob = sqlite3_column_blob(list.get(), 3);
+      const std::string bytes(static_cast<const char*>(blob), blob ? sqlite3_column_bytes(list.get(), 3) : 0);
+      try {
+        checkRow(bytes);
+        stored_.insert(pack(tile));
+      } catch (const std::runtime_error& e) {
+        damaged.emplace_back(tile, e.what());
+      }
+    }
+    if (rc != SQLITE_DONE) throw std::runtime_error(sqlite3_errmsg(db_));
+  }
+  if (damaged.empty()) return;
+  status_.damaged_rows = damaged.size();
+  status_.first_damage = tileName(damaged.front().first) + ": " + damaged.front().second;
+  if (access_ == Access::kReadOnly)
+    throw std::runtime_error(std::to_string(damaged.size()) + " damaged tile rows, the first " + status_.first_damage);
+  moveAside(damaged);
+}
+
+void TileStore::moveAside(const std::vector<std::pair<TileIndex, std::string>>& damaged) {
+  // In one transaction: the rows stay for inspection, the map goes on without them.
+  execute("BEGIN IMMEDIATE");
+  Statement move(db_, "INSERT INTO damaged_tiles (x, y, z, octree, reason) "
+                      "SELECT x, y, z, octree, ? FROM tiles WHERE x = ? AND y = ? AND z = ?");
+  Statement erase(db_, "DELETE FROM tiles WHERE x = ? AND y = ? AND z = ?");
+  for (const auto& [tile, why] : damaged) {
+    sqlite3_bind_text(move.get(), 1, why.c_str(), -1, SQLITE_TRANSIENT);
+    for (int a = 0; a < 3; ++a) sqlite3_bind_int(move.get(), a + 2, tile[a]);
+    move.run();
+    erase.bindTile(tile);
+    erase.run();
+  }
+  execute("COMMIT");
+}
+
+void TileStore::setAside(const TileIndex& tile, const std::string& why) {
+  requireWritable("setAside");
+  std::lock_guard<std::mutex> lock(mutex_);
+  std::lock_guard<std::mutex> db_lock(db_mutex_);
+  if (queue_.count(pack(tile)) || !stored_.count(pack(tile))) return;  // a new content replaces the row anyway
+  moveAside({{tile, why}});
+  stored_.erase(pack(tile));
+  ++status_.damaged_rows;
+  if (status_.first_damage.empty()) status_.first_damage = tileName(tile) + ": " + why;
+}
+
+void TileStore::removeDatabase(const std::string& path) {
+  if (::access(path.c_str(), F_OK) != 0) return;
+  sqlite3* db = nullptr;
+  const int opened = sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_FULLMUTEX, nullptr);
+  auto fail = [&](const std::string& why) {
+    sqlite3_close(db);
+    throw std::runtime_error("tile database '" + path + "' is not replaced: " + why);
+  };
+  if (opened != SQLITE_OK) fail(db ? sqlite3_errmsg(db) : "cannot open");
+  // The lock, held until the close: no accumulator can open the file between the check and the unlink.
+  if (sqlite3_exec(db, "PRAGMA locking_mode = EXCLUSIVE; BEGIN EXCLUSIVE", nullptr, nullptr, nullptr) != SQLITE_OK)
+    fail(sqlite3_errcode(db) == SQLITE_BUSY ? "locked: another process has it open" : sqlite3_errmsg(db));
+  sqlite3_stmt* format = nullptr;
+  const bool ours = sqlite3_prepare_v2(db, "SELECT value FROM meta WHERE key = 'format'", -1, &format, nullptr) ==
+                        SQLITE_OK &&
+                    sqlite3_step(format) == SQLITE_ROW && sqlite3_column_text(format, 0) &&
+                    std::string(reinterpret_cast<const char*>(sqlite3_column_text(format, 0))) == kFormat;
+  sqlite3_finalize(format);
+  if (!ours) fail("it is not a tile database of this version");
+  for (const char* suffix : {"", "-wal", "-shm"}) ::unlink((path + suffix).c_str());
+  sqlite3_exec(db, "ROLLBACK", nullptr, nullptr, nullptr);
+  sqlite3_close(db);
+}
+
+void TileStore::requireWritable(const char* what) const {
+  if (access_ == Access::kReadOnly)
+    throw std::logic_error(std::string("TileStore::") + what + " on a read-only store ('" + path_ + "')");
 }
 
 TileStore::~TileStore() {
@@ -170,6 +316,7 @@ void TileStore::execute(const char* sql) {
 }
 
 void TileStore::put(const TileIndex& tile, std::vector<Leaf> leaves) {
+  requireWritable("put");
   {
     std::lock_guard<std::mutex> lock(mutex_);
     Queued& q = queue_[pack(tile)];
@@ -238,8 +385,13 @@ bool TileStore::rowData(const TileIndex& tile, std::string* bytes) const {
   const int rc = sqlite3_step(read.get());
   if (rc == SQLITE_DONE) return false;
   if (rc != SQLITE_ROW) throw std::runtime_error("tile database '" + path_ + "': " + sqlite3_errmsg(db_));
-  bytes->assign(static_cast<const char*>(sqlite3_column_blob(read.get(), 0)),
-                static_cast<size_t>(sqlite3_column_bytes(read.get(), 0)));
+  const void* blob = sqlite3_column_blob(read.get(), 0);
+  bytes->assign(static_cast<const char*>(blob), blob ? static_cast<size_t>(sqlite3_column_bytes(read.get(), 0)) : 0);
+  try {
+    checkRow(*bytes);
+  } catch (const std::runtime_error& e) {
+    throw std::runtime_error("tile database '" + path_ + "': the row of " + tileName(tile) + " is damaged: " + e.what());
+  }
   return true;
 }
 
@@ -252,6 +404,7 @@ bool TileStore::flush() {
 }
 
 void TileStore::clear() {
+  requireWritable("clear");
   std::lock_guard<std::mutex> lock(mutex_);
   std::lock_guard<std::mutex> db_lock(db_mutex_);
   execute("DELETE FROM tiles");

@@ -114,13 +114,20 @@ int main(int argc, char** argv) {
     rosbag::View view(bag, rosbag::TopicQuery(topics));
     const size_t total = rosbag::View(bag, rosbag::TopicQuery(image_topic)).size();
     if (total == 0) throw std::runtime_error("no messages on '" + image_topic + "' in the bag");
+    const std::string image_type = depth_topic.empty() ? ros::message_traits::datatype<stereo_msgs::DisparityImage>()
+                                                       : ros::message_traits::datatype<sensor_msgs::Image>();
+    for (const rosbag::ConnectionInfo* c : rosbag::View(bag, rosbag::TopicQuery(image_topic)).getConnections())
+      if (c->datatype != image_type)
+        throw std::runtime_error("the bag's '" + image_topic + "' carries " + c->datatype + ", not " + image_type +
+                                 (depth_topic.empty() ? " (for depth images give --depth-topic)" : ""));
 
     tf2::BufferCore tf(ros::Duration(3600.0));
     so::FrameMapping mapping(mapper);
     so::MapFusion fusion(accumulator);
     // The whole flight, as the accumulator keeps it: tiles beyond
-    // max_extent_m go to PREFIX.db, a new one for each run.
-    for (const char* suffix : {".db", ".db-wal", ".db-shm"}) std::remove((prefix + suffix).c_str());
+    // max_extent_m go to PREFIX.db, a new one for each run (never one that
+    // an accumulator holds, nor another program's file).
+    so::TileStore::removeDatabase(prefix + ".db");
     fusion.openDatabase(prefix + ".db");
     sensor_msgs::CameraInfoConstPtr info;
     std::deque<PendingImage> pending;

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "stereo_occupancy/octomap_io.h"
 #include "stereo_occupancy/sim/map_evaluation.h"
 #include "stereo_occupancy/sim/map_rendering.h"
 #include "tool_support.h"
@@ -50,17 +51,7 @@ int run(int argc, char** argv) {
   }
   if (map_path.empty() || scenario_name.empty()) throw tools::UsageError("--map and --scenario are required");
   so::FlightScenario scenario = tools::scenarioNamed(scenario_name);
-  std::unique_ptr<octomap::OcTree> map;
-  if (map_path.size() > 3 && map_path.substr(map_path.size() - 3) == ".bt") {
-    map = std::make_unique<octomap::OcTree>(0.1);
-    if (!map->readBinary(map_path)) throw std::runtime_error("cannot read '" + map_path + "' as a binary OcTree");
-  } else {
-    std::unique_ptr<octomap::AbstractOcTree> tree(octomap::AbstractOcTree::read(map_path));
-    auto* oc = dynamic_cast<octomap::OcTree*>(tree.get());
-    if (!oc) throw std::runtime_error("'" + map_path + "' holds no OcTree");
-    tree.release();
-    map.reset(oc);
-  }
+  const std::unique_ptr<octomap::OcTree> map = so::readOcTreeFile(map_path);
   if (!(map->getResolution() >= 0.01)) throw std::runtime_error("'" + map_path + "' has no usable resolution");
   if (frames > 0 && static_cast<size_t>(frames) < scenario.T_W_B.size()) scenario.T_W_B.resize(frames);
   const so::ObservedGroundTruth truth = so::observeGroundTruth(scenario, map->getResolution(), max_range, 5, 4);

@@ -66,7 +66,8 @@ int run(int argc, char** argv) {
   const bool ot = out.size() > 3 && out.compare(out.size() - 3, 3, ".ot") == 0;
   if (!bt && !ot) throw tools::UsageError("--out must end in .bt or .ot");
   if (access(database.c_str(), R_OK) != 0) throw std::runtime_error("cannot read '" + database + "'");
-  so::TileStore store(database, 0.0);  // its own resolution
+  // Read-only, at its own resolution: exporting never changes the database.
+  so::TileStore store(database, 0.0, so::TileStore::Access::kReadOnly);
   if (box.isEmpty()) {
     // The whole mission, a tile at a time: it may not fit in memory at once.
     so::MissionMap::writeStore(store, out, threshold);

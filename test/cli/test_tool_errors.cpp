@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 #include <rosbag/bag.h>
+#include <sensor_msgs/Image.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <stereo_msgs/DisparityImage.h>
 #include <sys/wait.h>
@@ -18,6 +19,7 @@
 #include <vector>
 
 #include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/store/tile_store.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
 
 namespace so = stereo_occupancy;
@@ -217,4 +219,100 @@ TEST(ToolErrors, ExportMap) {
               {tool + " --database /nonexistent/m.db --out " + kTmp + "e.bt",
                tool + " --database " + kTmp + "not_tiles.db --out " + kTmp + "e.bt"},
               1);
+}
+
+namespace {
+
+/// A bag at @p path with one disparity image of the Table I scene and its pose.
+void writeOneImageBag(const std::string& path) {
+  const so::StereoCameraModel camera{so::StereoCameraConfig()};
+  Eigen::Isometry3d T_W_C;
+  const cv::Mat image = so::table1Image(camera, &T_W_C);
+  rosbag::Bag bag(path, rosbag::bagmode::Write);
+  const ros::Time t0(1000.0);
+  tf2_msgs::TFMessage tf;
+  tf.transforms.push_back(so::toTransformMsg(T_W_C, t0, "map", "camera_optical"));
+  bag.write("/tf", t0, tf);
+  std_msgs::Header header;
+  header.stamp = t0;
+  header.frame_id = "camera_optical";
+  stereo_msgs::DisparityImage m;
+  so::toDisparityImageMsg(image, header, camera.config(), 128.0, 1.0 / 16.0, &m);
+  bag.write("/stereo/disparity", t0, m);
+}
+
+}  // namespace
+
+// bag_to_map never replaces a database that a running accumulator holds (it
+// lost 49 246 of 66 049 occupied cells so), and a bag whose topic carries
+// another type is an error, not an empty map with exit 0.
+TEST(ToolErrors, BagToMapHonoursAHeldDatabaseAndTheTopicsType) {
+  const std::string bag = kTmp + "one_image.bag", held = kTmp + "held_mission";
+  writeOneImageBag(bag);
+  for (const char* suffix : {".db", ".db-wal", ".db-shm"}) std::remove((held + suffix).c_str());
+  {
+    so::TileStore mission(held + ".db", 0.25);  // as an accumulator holds it
+    so::MapAccumulator::Leaf leaf;
+    leaf.key = octomap::OcTreeKey(32768, 32768, 32768);
+    leaf.depth = so::MapAccumulator::kTileDepth;
+    leaf.log_odds = 2.0f;
+    mission.put(so::MapAccumulator::TileIndex(0, 0, 0), {leaf});
+    ASSERT_TRUE(mission.flush());
+    const Result r = run(std::string(BAG_TO_MAP_EXE) + " --bag " + bag + " --output " + held);
+    ASSERT_TRUE(WIFEXITED(r.status)) << r.err;
+    EXPECT_EQ(WEXITSTATUS(r.status), 1) << r.err;
+    EXPECT_NE(r.err.find("locked"), std::string::npos) << r.err;
+    EXPECT_EQ(mission.tiles().size(), 1u);
+  }
+  so::TileStore after(held + ".db", 0.25);
+  EXPECT_EQ(after.tiles().size(), 1u) << "the held database was replaced";
+
+  const std::string typed = kTmp + "typed.bag";
+  {
+    rosbag::Bag b(typed, rosbag::bagmode::Write);
+    sensor_msgs::Image image;
+    image.header.stamp = ros::Time(1000.0);
+    b.write("/stereo/disparity", image.header.stamp, image);
+  }
+  const Result r = run(std::string(BAG_TO_MAP_EXE) + " --bag " + typed + " --output " + kTmp + "typed_map");
+  ASSERT_TRUE(WIFEXITED(r.status)) << r.err;
+  EXPECT_EQ(WEXITSTATUS(r.status), 1) << r.err;
+  EXPECT_NE(r.err.find("carries sensor_msgs/Image, not stereo_msgs/DisparityImage"), std::string::npos) << r.err;
+  for (const std::string& f : {bag, typed}) std::remove(f.c_str());
+}
+
+// export_map only reads: a 0-byte file stays 0 bytes (it became 4 kB), and a
+// database with a row cut short is refused instead of exported as success.
+TEST(ToolErrors, ExportMapOnlyReadsAndRefusesADamagedRow) {
+  const std::string tool = EXPORT_MAP_EXE;
+  const std::string empty = kTmp + "empty_tiles.db";
+  writeFile(empty, "");
+  expectError("export_map", {tool + " --database " + empty + " --out " + kTmp + "e.ot"}, 1);
+  std::ifstream in(empty, std::ios::binary | std::ios::ate);
+  EXPECT_EQ(static_cast<long>(in.tellg()), 0L) << "export_map wrote to its input";
+  const std::string damaged = kTmp + "cut_row.db";
+  for (const char* suffix : {"", "-wal", "-shm"}) std::remove((damaged + suffix).c_str());
+  {
+    so::TileStore store(damaged, 0.25);
+    for (int x = 0; x < 2; ++x) {
+      so::MapAccumulator::Leaf leaf;
+      leaf.key = octomap::OcTreeKey(static_cast<octomap::key_type>(32768 + x * so::MapAccumulator::kTileCells), 32768,
+                                    32768);
+      leaf.depth = so::MapAccumulator::kTileDepth + 2;
+      leaf.log_odds = 1.0f;
+      store.put(so::MapAccumulator::TileIndex(x, 0, 0), {leaf});
+    }
+    ASSERT_TRUE(store.flush());
+  }
+  ASSERT_EQ(run("sqlite3 -version").status, 0) << "the test needs the sqlite3 command (Debian's sqlite3)";
+  ASSERT_EQ(run("sqlite3 " + damaged + " \"UPDATE tiles SET octree = substr(octree, 1, length(octree) - 5) WHERE x = 1\"").status, 0);
+  for (const char* ext : {".ot", ".bt"}) {
+    const std::string out = kTmp + "cut_row_export" + ext;
+    std::remove(out.c_str());
+    const Result r = run(tool + " --database " + damaged + " --out " + out);
+    ASSERT_TRUE(WIFEXITED(r.status)) << r.err;
+    EXPECT_EQ(WEXITSTATUS(r.status), 1) << ext << ": " << r.out << r.err;
+    EXPECT_NE(r.err.find("damaged"), std::string::npos) << r.err;
+    EXPECT_FALSE(std::ifstream(out).good()) << out << " was written";
+  }
 }

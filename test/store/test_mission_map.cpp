@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <octomap/OcTree.h>
+#include <sqlite3.h>
 
 #include <signal.h>
 #include <sys/resource.h>
@@ -54,6 +55,49 @@ GridUpdate filledBox(const Eigen::Vector3i& origin_index, const Eigen::Vector3i&
   u.run_length = {cells};
   u.log_odds.assign(cells, log_odds);
   return u;
+}
+
+/// Runs @p sql on the database at @p path with a connection of its own; false on an error.
+bool runSql(const std::string& path, const std::string& sql) {
+  sqlite3* db = nullptr;
+  bool ok = sqlite3_open(path.c_str(), &db) == SQLITE_OK &&
+            sqlite3_exec(db, sql.c_str(), nullptr, nullptr, nullptr) == SQLITE_OK;
+  sqlite3_close(db);
+  return ok;
+}
+
+/// The first column of the first row @p sql gives, as an integer (-1: none or an error).
+long long sqlNumber(const std::string& path, const std::string& sql) {
+  sqlite3* db = nullptr;
+  sqlite3_stmt* stmt = nullptr;
+  long long value = -1;
+  if (sqlite3_open(path.c_str(), &db) == SQLITE_OK && sqlite3_prepare_v2(db, sql.c_str(), -1, &stmt, nullptr) == SQLITE_OK &&
+      sqlite3_step(stmt) == SQLITE_ROW)
+    value = sqlite3_column_int64(stmt, 0);
+  sqlite3_finalize(stmt);
+  sqlite3_close(db);
+  return value;
+}
+
+/// The message TileStore's constructor throws for @p path, or "".
+std::string storeRefusal(const std::string& path, double resolution_m,
+                         TileStore::Access access = TileStore::Access::kReadWrite) {
+  try {
+    TileStore store(path, resolution_m, access);
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+/// One leaf filling @p tile (its node at kTileDepth) with @p log_odds.
+MapAccumulator::Leaf tileLeaf(const MapAccumulator::TileIndex& tile, float log_odds) {
+  MapAccumulator::Leaf leaf;
+  const auto key = [&](int t) { return static_cast<octomap::key_type>(32768 + t * MapAccumulator::kTileCells); };
+  leaf.key = octomap::OcTreeKey(key(tile.x()), key(tile.y()), key(tile.z()));
+  leaf.depth = MapAccumulator::kTileDepth;
+  leaf.log_odds = log_odds;
+  return leaf;
 }
 
 /// Cells with positive log-odds in @p tree.
@@ -398,4 +442,104 @@ TEST(TileStore, AFullDiskIsAnErrorAndLosesNothing) {
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 0) << "10: a write past the limit succeeded, 11: no reason, 12: the tile was "
                                        "lost, 13/14: not written once there was room, 15: not there after reopening";
+}
+
+// Damaged rows (2 MB and 50 kB of 0xff, on which OctoMap's reader overflowed
+// its stack or grew to gigabytes, and a row cut short) are moved to
+// damaged_tiles when the store opens: the other tiles stay, their tiles start
+// empty, the whole mission saves, and a read-only opener refuses the file.
+TEST(TileStore, DamagedRowsAreSetAsideAndTheRestIsKept) {
+  const std::string path = freshDatabase("damaged");
+  {
+    TileStore store(path, kRes);
+    for (int x = 0; x < 4; ++x) store.put(MapAccumulator::TileIndex(x, 0, 0), {tileLeaf({x, 0, 0}, 2.0f)});
+    ASSERT_TRUE(store.flush());
+  }
+  ASSERT_TRUE(runSql(path, "UPDATE tiles SET octree = zeroblob(2097152) WHERE x = 1; "
+                           "UPDATE tiles SET octree = zeroblob(51200) WHERE x = 3; "
+                           "UPDATE tiles SET octree = substr(octree, 1, length(octree) - 5) WHERE x = 2"));
+  // zeroblob() gives zeros; 0xff is what the damage was.
+  ASSERT_TRUE(runSql(path, "UPDATE tiles SET octree = CAST(replace(hex(octree), '00', 'FF') AS BLOB) WHERE x IN (1, 3)"));
+  ASSERT_TRUE(runSql(path, "UPDATE tiles SET octree = unhex(octree) WHERE x IN (1, 3)") ||
+              runSql(path, "SELECT 1"));  // unhex() is SQLite 3.41+; the hex text is damage too
+  EXPECT_NE(storeRefusal(path, 0.0, TileStore::Access::kReadOnly).find("3 damaged tile rows"), std::string::npos)
+      << storeRefusal(path, 0.0, TileStore::Access::kReadOnly);
+  {
+    TileStore store(path, kRes);
+    EXPECT_EQ(store.status().damaged_rows, 3u);
+    EXPECT_NE(store.status().first_damage.find("tile ("), std::string::npos) << store.status().first_damage;
+    const auto tiles = store.tiles();
+    ASSERT_EQ(tiles.size(), 1u);
+    EXPECT_EQ(tiles[0], MapAccumulator::TileIndex(0, 0, 0));
+    std::vector<MapAccumulator::Leaf> leaves;
+    ASSERT_TRUE(store.get(tiles[0], &leaves));
+    EXPECT_EQ(leaves.size(), 1u);
+    const auto paths = MissionMap::saveStore(store, ::testing::TempDir(), "damaged", 0.5);
+    const auto saved = readOcTreeFile(paths[1]);
+    EXPECT_EQ(saved->getNumLeafNodes(), 1u);
+    // A row found damaged later is set aside the same way.
+    store.setAside(tiles[0], "damaged later");
+    EXPECT_TRUE(store.tiles().empty());
+    EXPECT_FALSE(store.get(tiles[0], &leaves));
+    EXPECT_EQ(store.status().damaged_rows, 4u);
+  }
+  EXPECT_EQ(sqlNumber(path, "SELECT count(*) FROM damaged_tiles"), 4);
+  EXPECT_EQ(sqlNumber(path, "SELECT length(octree) FROM damaged_tiles WHERE x = 1") > 50000, true);
+  EXPECT_EQ(sqlNumber(path, "SELECT count(*) FROM tiles"), 0);
+}
+
+// Another program's SQLite file is refused and left byte for byte as it was;
+// a meta entry that is NULL or no number is refused by name, and the refused
+// file is not left locked. A read-only opener never writes (a 0-byte file stays 0 bytes).
+TEST(TileStore, ForeignFilesAndBadMetaAreRefusedUnchanged) {
+  const std::string foreign = freshDatabase("foreign");
+  ASSERT_TRUE(runSql(foreign, "CREATE TABLE users (name TEXT); INSERT INTO users VALUES ('pilot')"));
+  const std::string before = fileBytes(foreign);
+  EXPECT_NE(storeRefusal(foreign, kRes).find("not a tile database (its tables: users)"), std::string::npos)
+      << storeRefusal(foreign, kRes);
+  EXPECT_TRUE(fileBytes(foreign) == before) << "the foreign file was changed";
+  EXPECT_THROW(TileStore::removeDatabase(foreign), std::runtime_error);
+  EXPECT_TRUE(fileBytes(foreign) == before);
+
+  const std::string bad_meta = freshDatabase("bad_meta");
+  const std::string tables = "CREATE TABLE meta (key TEXT, value TEXT); CREATE TABLE tiles (x INTEGER);";
+  ASSERT_TRUE(runSql(bad_meta, tables + "INSERT INTO meta VALUES ('format', NULL)"));
+  EXPECT_NE(storeRefusal(bad_meta, kRes).find("NULL value"), std::string::npos) << storeRefusal(bad_meta, kRes);
+  EXPECT_TRUE(runSql(bad_meta, "BEGIN EXCLUSIVE; COMMIT")) << "the refused database stayed locked";
+  for (const std::string resolution : {"'abc'", "'0'", "'-1'", "'inf'", "NULL"}) {
+    const std::string path = freshDatabase("bad_resolution");
+    ASSERT_TRUE(runSql(path, tables + "INSERT INTO meta VALUES ('format', 'stereo_occupancy tiles 1'), "
+                                      "('resolution_m', " + resolution + ")"));
+    const std::string why = storeRefusal(path, 0.0, TileStore::Access::kReadOnly);
+    EXPECT_TRUE(why.find("not a positive number") != std::string::npos || why.find("NULL") != std::string::npos)
+        << resolution << ": " << why;
+    EXPECT_NE(why.find(path), std::string::npos) << why;
+  }
+  const std::string empty = freshDatabase("empty");
+  std::ofstream(empty).close();
+  EXPECT_NE(storeRefusal(empty, 0.0, TileStore::Access::kReadOnly).find("not a tile database"), std::string::npos);
+  EXPECT_EQ(fileBytes(empty).size(), 0u);
+}
+
+// bag_to_map replaces its output's database only through removeDatabase: a
+// database an accumulator holds is refused (and stays), an unheld one goes.
+TEST(TileStore, RemoveDatabaseHonoursTheLock) {
+  const std::string path = freshDatabase("remove");
+  {
+    TileStore store(path, kRes);
+    store.put(MapAccumulator::TileIndex(0, 0, 0), {tileLeaf({0, 0, 0}, 1.0f)});
+    ASSERT_TRUE(store.flush());
+    try {
+      TileStore::removeDatabase(path);
+      ADD_FAILURE() << "a held database was removed";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("locked"), std::string::npos) << e.what();
+    }
+    EXPECT_TRUE(std::ifstream(path).good());
+    std::vector<MapAccumulator::Leaf> leaves;
+    EXPECT_TRUE(store.get(MapAccumulator::TileIndex(0, 0, 0), &leaves));
+  }
+  TileStore::removeDatabase(path);
+  for (const char* suffix : {"", "-wal", "-shm"}) EXPECT_FALSE(std::ifstream(path + suffix).good()) << suffix;
+  TileStore::removeDatabase(path);  // none: nothing to do
 }
