@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets (clang, with AddressSanitizer and
 # UndefinedBehaviorSanitizer) over the core and runs them: the drawer for
-# SECONDS (default 60), the accumulator's update input for half as long.
+# SECONDS (default 60), the accumulator's update input and the map-file and
+# tile-row reader (test/fuzz/fuzz_octree_data.cpp) for half as long each.
 # Writes a JUnit file to $RESULTS (if set) so the test command counts it.
 # Crashes land in build/fuzz/; each target's log in build/fuzz/<target>.log.
 #
@@ -28,7 +29,7 @@ cp -n "$repo"/test/fuzz/corpus/* "$out/$corpus/" 2>/dev/null || true
 
 flags=(-std=c++17 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined
        -I"$repo/include" -isystem /usr/include/eigen3 -isystem /usr/include/opencv4)
-targets=(fuzz_disparity_drawer fuzz_occupancy_update)
+targets=(fuzz_disparity_drawer fuzz_occupancy_update fuzz_octree_data)
 rm -rf "$out/obj" "$out/core"  # objects of renamed sources must not link in
 mkdir -p "$out/obj" "$out/core"
 # One object per source, compiled in parallel; the core's objects are shared.
@@ -57,6 +58,14 @@ mkdir -p "$out/$update_corpus"
 update_status=0
 run fuzz_occupancy_update "$(( (seconds + 1) / 2 ))" "$update_corpus" || update_status=$?
 tail -n 12 "$out/fuzz_occupancy_update.log"
+# Map files and tile rows (the bytes OctoMap's readers would take) from
+# nothing, as long as the updates.
+tree_corpus="tree-$corpus"
+[ "${FUZZ_EXPLORE:-0}" = 1 ] || rm -rf "$out/$tree_corpus"
+mkdir -p "$out/$tree_corpus"
+tree_status=0
+run fuzz_octree_data "$(( (seconds + 1) / 2 ))" "$tree_corpus" || tree_status=$?
+tail -n 12 "$out/fuzz_octree_data.log"
 if [ -n "${RESULTS:-}" ]; then
   mkdir -p "$RESULTS"
   testcase() {  # TARGET SECONDS STATUS
@@ -66,10 +75,11 @@ if [ -n "${RESULTS:-}" ]; then
   }
   {
     echo '<?xml version="1.0" encoding="UTF-8"?>'
-    echo "<testsuite name=\"fuzz\" tests=\"2\" failures=\"$(( (status != 0) + (update_status != 0) ))\" errors=\"0\">"
+    echo "<testsuite name=\"fuzz\" tests=\"3\" failures=\"$(( (status != 0) + (update_status != 0) + (tree_status != 0) ))\" errors=\"0\">"
     testcase fuzz_disparity_drawer "$seconds" "$status"
     testcase fuzz_occupancy_update "$(( (seconds + 1) / 2 ))" "$update_status"
+    testcase fuzz_octree_data "$(( (seconds + 1) / 2 ))" "$tree_status"
     echo "</testsuite>"
   } >"$RESULTS/fuzz.xml"
 fi
-[ $status = 0 ] && [ $update_status = 0 ]
+[ $status = 0 ] && [ $update_status = 0 ] && [ $tree_status = 0 ]

@@ -25,10 +25,9 @@ double DistanceDependentBlur::sigmaAt(double r_m) const {
 
 int DistanceDependentBlur::paddingCells(double max_range_m, double resolution_m) const {
   if (!config_.enabled()) return 0;
-  // Capped, so that an absurd σ cannot overflow the int; a grid padded that
-  // much exceeds any max_grid_cells and is refused.
-  const double cells = std::ceil(config_.truncate_sigmas * sigmaAt(max_range_m) / resolution_m) + 1.0;
-  return cells < kMaxPaddingCells ? static_cast<int>(cells) : kMaxPaddingCells;
+  const double sigma_cells = std::min(sigmaAt(max_range_m) / resolution_m, BlurConfig::kMaxSigmaCells);
+  const double cells = std::ceil(config_.truncate_sigmas * sigma_cells) + 1.0;
+  return std::min(static_cast<int>(cells), kMaxPaddingCells);
 }
 
 const std::vector<float>& DistanceDependentBlur::kernel(int q) {
@@ -106,7 +105,7 @@ float knownValue(float v) { return v == LocalGrid::kUnknown ? 0.0f : v; }
 
 int DistanceDependentBlur::SigmaIndex::operator()(double r2) const {
   const double steps = std::sqrt(trans2 + r2 * angle2) * to_steps;  // eq. 17, in sigma_step_cells steps
-  return steps >= kMaxSigmaIndex ? kMaxSigmaIndex : static_cast<int>(steps + 0.5);  // round half up, as lround
+  return steps >= max_steps ? max_steps : static_cast<int>(steps + 0.5);  // round half up, as lround
 }
 
 void DistanceDependentBlur::apply(const Eigen::Vector3d& W_camera, LocalGrid* grid) {
@@ -120,7 +119,8 @@ void DistanceDependentBlur::apply(const Eigen::Vector3d& W_camera, LocalGrid* gr
   const double c = grid->resolution();
   const SigmaIndex sigma_index{config_.sigma_trans_m * config_.sigma_trans_m,
                                config_.sigma_angle_rad * config_.sigma_angle_rad,
-                               1.0 / (c * config_.sigma_step_cells)};
+                               1.0 / (c * config_.sigma_step_cells),
+                               static_cast<int>(BlurConfig::kMaxSigmaCells / config_.sigma_step_cells)};
   const int q_max = sigma_index(distances.r2_max);
   prepareWeights(q_max);
   growExtents(*grid);

@@ -117,7 +117,8 @@ void referenceBlur(DistanceDependentBlur* blur, const Eigen::Vector3d& W_camera,
         const double steps = std::sqrt(cfg.sigma_trans_m * cfg.sigma_trans_m +
                                        (sx + syz) * cfg.sigma_angle_rad * cfg.sigma_angle_rad) /
                              (c * cfg.sigma_step_cells);
-        q[i] = steps >= 255.0 ? 255 : static_cast<int>(steps + 0.5);
+        const int max_steps = static_cast<int>(BlurConfig::kMaxSigmaCells / cfg.sigma_step_cells);
+        q[i] = steps >= max_steps ? max_steps : static_cast<int>(steps + 0.5);
         const float v = grid->data()[i];
         a[i] = v == LocalGrid::kUnknown ? 0.0f : v;
       }
@@ -211,25 +212,36 @@ TEST(DistanceDependentBlur, RowThroughTheCameraEqualsThePlainBlur) {
   EXPECT_GT(changed, grid.numCells() / 2);
 }
 
-// An absurd σ (found by the fuzzer: σ_trans of 1e25 m) gives a capped
-// padding, not an int overflow, and the drawer refuses the grid it would need.
-// The table refuses an absurd σ; a blur built without that check still caps
-// its padding, and the largest valid σ pads a frustum box the drawer refuses
-// by its cell count instead of allocating it.
-TEST(DistanceDependentBlur, AbsurdSigmaCapsThePadding) {
+// σ is capped at kMaxSigmaCells, so every value of the ranges costs a
+// bounded grid and kernel: σ_angle 0.5 rad at 25 m (the top of its range)
+// took 43 s and 1 GB an image uncapped. An absurd σ (found by the fuzzer:
+// σ_trans of 1e25 m), refused by the table, still pads by the cap.
+TEST(DistanceDependentBlur, SigmaIsCappedSoEveryValueInRangeIsBounded) {
   BlurConfig cfg;
   cfg.sigma_trans_m = 1e25;
   std::string why;
   EXPECT_FALSE(cfg.isValid(&why));
   EXPECT_EQ(why.rfind("sigma_trans_m must be in [0, 10]", 0), 0u) << why;
-  EXPECT_EQ(DistanceDependentBlur(cfg).paddingCells(25.0, 0.25), DistanceDependentBlur::kMaxPaddingCells);
+  const int padding = static_cast<int>(std::ceil(cfg.truncate_sigmas * BlurConfig::kMaxSigmaCells)) + 1;  // 25
+  EXPECT_EQ(DistanceDependentBlur(cfg).paddingCells(25.0, 0.25), padding);
+  cfg.sigma_trans_m = 10.0;  // the ranges' ends
+  cfg.sigma_angle_rad = 0.5;
+  ASSERT_TRUE(cfg.isValid(&why)) << why;
+  DistanceDependentBlur blur(cfg);
+  for (double res : {0.02, 0.25, 2.0}) EXPECT_EQ(blur.paddingCells(25.0, res), padding) << res;
+  const int widest = static_cast<int>(BlurConfig::kMaxSigmaCells / cfg.sigma_step_cells);
+  EXPECT_EQ(blur.kernel(widest).size(), 2u * 24u + 1u);
+  // The drawer's grid: the unblurred frustum box and the capped padding, no more.
   DrawingConfig drawing;
+  DisparityDrawer unblurred(StereoCameraConfig{}, drawing);
   drawing.blur = cfg;
-  EXPECT_THROW(DisparityDrawer(StereoCameraConfig{}, drawing), std::invalid_argument);
-  drawing.blur.sigma_trans_m = 10.0;
-  drawing.blur.sigma_angle_rad = 0.5;
-  drawing.max_grid_cells = 1u << 20;
-  DisparityDrawer drawer(StereoCameraConfig{}, drawing);
-  LocalGrid grid;
-  EXPECT_THROW(drawer.prepareGrid(Eigen::Isometry3d::Identity(), &grid), std::invalid_argument);
+  DisparityDrawer blurred(StereoCameraConfig{}, drawing);
+  LocalGrid plain_grid, blurred_grid;
+  unblurred.prepareGrid(Eigen::Isometry3d::Identity(), &plain_grid);
+  blurred.prepareGrid(Eigen::Isometry3d::Identity(), &blurred_grid);
+  EXPECT_EQ(blurred_grid.size(), plain_grid.size() + Eigen::Vector3i::Constant(2 * padding));
+  // Every cell at the cap blurs with the widest kernel, and the whole grid's blur completes.
+  for (size_t i = 0; i < blurred_grid.numCells(); i += 97) blurred_grid.data()[i] = 0.85f;
+  blur.apply(Eigen::Vector3d::Zero(), &blurred_grid);
+  EXPECT_GT(blurred_grid.countKnown(), blurred_grid.numCells() / 2);
 }
