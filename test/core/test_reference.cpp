@@ -312,8 +312,13 @@ Comparison compare(const LocalGrid& drawn, const LocalGrid& reference, double to
 }  // namespace
 
 // The table's bilinear interpolation against the exact model: < 0.005 in
-// log-odds (see test_inverse_sensor_model.cpp); float sums add a little.
-constexpr double kValueTolerance = 0.01;
+// log-odds over the whole model (test_inverse_sensor_model.cpp); on these
+// frames the largest difference is 0.0011, float sums included, so 0.002
+// (what docs/tests.md promises) holds with room to spare.
+constexpr double kValueTolerance = 0.002;
+// Cells next to a tie (a line along a cell border, see drawLine) are left
+// out; on these frames they are at most 7.3 % of the known cells.
+constexpr double kMaxTieShare = 0.08;
 
 TEST(ReferenceImplementation, PaperAlgorithmsMatchCellByCell) {
   const StereoCameraConfig camera;
@@ -346,7 +351,7 @@ TEST(ReferenceImplementation, PaperAlgorithmsMatchCellByCell) {
                   toString(algorithm), resolution, c.known, ref.ties.size(), c.only_one, c.value_differs,
                   c.max_difference);
       EXPECT_GT(c.known, 2000u);
-      EXPECT_LT(ref.ties.size(), c.known / 10);
+      EXPECT_LT(static_cast<double>(ref.ties.size()), kMaxTieShare * c.known);
       // Identical cells; values within the table's error.
       EXPECT_EQ(c.only_one, 0u);
       EXPECT_EQ(c.value_differs, 0u) << "max difference " << c.max_difference;
@@ -398,7 +403,7 @@ TEST(ReferenceImplementation, BoundedAlgorithmsMatchCellByCell) {
                   toString(algorithm), k.resolution, c.known, ref.ties.size(), c.only_one, c.value_differs,
                   c.max_difference);
       EXPECT_GT(c.known, 2000u);
-      EXPECT_LT(ref.ties.size(), c.known / 10);
+      EXPECT_LT(static_cast<double>(ref.ties.size()), kMaxTieShare * c.known);
       EXPECT_EQ(c.only_one, 0u);
       EXPECT_EQ(c.value_differs, 0u) << "max difference " << c.max_difference;
     }
