@@ -12,7 +12,10 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <array>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -21,6 +24,8 @@
 #include <memory>
 #include <sstream>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
@@ -120,17 +125,36 @@ TEST(HostileUpdates, WorkFollowsTheCellsNotTheClaimedBox) {
   EXPECT_EQ(fullTree(map->tree()), before);
 }
 
-// Two cells at the ends of a 2^31 - 1 wide row: no int overflow, two blocks.
+// Two cells at the ends of a 2^31 - 1 wide row: no int overflow, and the
+// walk visits exactly two blocks, each with its one cell and nothing else.
 TEST(HostileUpdates, AFullWidthRowDoesNotOverflow) {
   const GridUpdate u = claimedBox(Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(kIntMax, 1, 1), {0, kIntMax - 1u});
   ASSERT_TRUE(u.isConsistent());
-  EXPECT_TRUE(runsWithin(size_t{64} << 20, [&] {
-    int blocks = 0;
-    u.forEachSiblingBlock([&](const Eigen::Vector3i& g, const float(&)[8]) {
-      blocks += (blocks == 0 && g.x() == 0) || (blocks == 1 && g.x() == kIntMax - 1);  // 2^31 - 2 is even
+  const auto walkVisitsTheTwoBlocks = [&] {
+    std::vector<std::pair<Eigen::Vector3i, std::array<float, 8>>> seen;
+    u.forEachSiblingBlock([&](const Eigen::Vector3i& g, const float(&values)[8]) {
+      std::array<float, 8> v;
+      std::copy(values, values + 8, v.begin());
+      seen.emplace_back(g, v);
     });
-    return blocks == 2;
-  }));
+    // Cell 0 and cell 2^31 - 2 (even) are each the first cell (x, y, z even)
+    // of their block; the other seven are not in the update (NaN), the
+    // second block's x + 1 being past the row's end.
+    const Eigen::Vector3i expected[2] = {Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(kIntMax - 1, 0, 0)};
+    bool ok = seen.size() == 2;
+    for (size_t k = 0; ok && k < 2; ++k) {
+      ok = seen[k].first == expected[k] && seen[k].second[0] == 1.0f;
+      for (int i = 1; i < 8; ++i) ok = ok && std::isnan(seen[k].second[i]);
+    }
+    if (!ok) {  // the child's own report: the parent sees only its exit status
+      std::fprintf(stderr, "%zu blocks visited, expected 2:\n", seen.size());
+      for (const auto& [g, v] : seen)
+        std::fprintf(stderr, "  (%d, %d, %d): %g %g %g %g %g %g %g %g\n", g.x(), g.y(), g.z(), v[0], v[1], v[2],
+                     v[3], v[4], v[5], v[6], v[7]);
+    }
+    return ok;
+  };
+  EXPECT_TRUE(runsWithin(size_t{64} << 20, walkVisitsTheTwoBlocks)) << "out of memory or other blocks (listed above)";
   auto map = smallMap();
   const std::string before = fullTree(map->tree());
   EXPECT_FALSE(map->integrate(u));
