@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstring>
 #include <random>
 
@@ -182,13 +183,19 @@ TEST(DisparityPyramid, EnlargedLevelsObeyEq15) {
   EXPECT_DOUBLE_EQ(DisparityPyramid::centreOf(1, 320, 641), 640.0);
 }
 
+// Eq. 13 for random disparities between the far and the near end; those at
+// a clamped level are skipped, and the test counts the rest against the share
+// of [far, near] that eq. 13 leaves unclamped.
 TEST(PyramidLevelTable, LevelChoiceObeysEq13) {
-  const StereoCameraModel cam{StereoCameraConfig()};
+  const StereoCameraConfig cfg;
+  const StereoCameraModel cam{cfg};
   std::mt19937 rng(5);
+  constexpr int kSamples = 5000;
   for (double c : {0.1, 0.25, 0.5, 1.0}) {
     const PyramidLevelTable table(cam, c);
     std::uniform_real_distribution<double> d_dist(cam.farDisparity(), cam.nearDisparity());
-    for (int n = 0; n < 5000; ++n) {
+    int tested = 0;
+    for (int n = 0; n < kSamples; ++n) {
       const float d = static_cast<float>(d_dist(rng));
       const int i = table.levelForDisparity(d);
       if (i == table.topLevel() || i == table.minLevel()) continue;  // clamped
@@ -197,7 +204,23 @@ TEST(PyramidLevelTable, LevelChoiceObeysEq13) {
       ASSERT_GT(dp, 0.5 * c) << "d=" << d << " level " << i;  // eq. 13
       ASSERT_LE(dp, c) << "d=" << d << " level " << i;
       ASSERT_EQ(table.levelForDepth(z), i);
+      ++tested;
     }
+    // Unclamped: floor(log2(c·d/b)) above the lowest level (that of the far
+    // end, at most 0) and below the top (that of the nearest range, at most
+    // the image's log2 size), i.e. c·d/b in [2^(lowest + 1), 2^top).
+    const double b = cfg.baseline_m;
+    const int top = std::min(static_cast<int>(std::floor(std::log2(c * cam.bf() / cfg.min_range_m / b))),
+                             static_cast<int>(std::floor(std::log2(std::max(cfg.width_px, cfg.height_px)))));
+    const int lowest = std::min(0, static_cast<int>(std::floor(std::log2(c * cam.farDisparity() / b))));
+    const double lo = std::max(cam.farDisparity(), b * std::ldexp(1.0, lowest + 1) / c);
+    const double hi = std::min(cam.nearDisparity(), b * std::ldexp(1.0, top) / c);
+    const double share = std::max(0.0, hi - lo) / (cam.nearDisparity() - cam.farDisparity());
+    // Within 5 standard deviations of the binomial count (the seed is fixed: no flakiness).
+    EXPECT_NEAR(tested, kSamples * share, 5.0 * std::sqrt(kSamples * share * (1.0 - share)) + 1.0) << "cell " << c;
+    EXPECT_GT(tested, 1000) << "cell " << c;
+    std::printf("[          ] cell %.2f m: %d of %d disparities at an unclamped level (expected %.0f)\n", c, tested,
+                kSamples, kSamples * share);
   }
 }
 
