@@ -269,9 +269,6 @@ TEST_F(LineDrawing, ObstaclePriority) {
   EXPECT_NEAR(a.at(far.x(), far.y(), far.z()), model.freeLogOdds(), 1e-5);
 }
 
-// A segment [l_begin, l_stop] of a line (the bounded pyramid's shared free
-// stretch and the lines of its children) draws exactly the cells of the whole
-// line whose slab centre planes lie inside it, with the same values.
 // A worker's grid follows the grids drawn: after one huge grid it does not
 // keep that memory for the small grids that follow.
 TEST_F(LineDrawing, WorkerGridsLetGoOfAHugeGrid) {
@@ -293,6 +290,9 @@ TEST_F(LineDrawing, WorkerGridsLetGoOfAHugeGrid) {
   EXPECT_GT(small.countKnown(), 100u);
 }
 
+// A segment [l_begin, l_stop] of a line (the bounded pyramid's shared free
+// stretch and the lines of its children) draws exactly the cells of the whole
+// line whose slab centre planes lie inside it, with the same values.
 TEST_F(LineDrawing, SegmentsDrawThePartOfTheLine) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> u(-1.0, 1.0), range(2.0, 24.0), cut(0.0, 1.0);

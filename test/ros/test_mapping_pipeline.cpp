@@ -203,7 +203,7 @@ TEST_F(PipelineTest, UpdatesThatNeverArriveAreCounted) {
 // Pruning follows the updates' stamps, so that a replay prunes where the flight did.
 TEST_F(PipelineTest, TheMapIsPrunedOnTheUpdatesClock) {
   OctomapAccumulatorParameters params;
-  params.map.max_extent_m = 5.0;  // the wall, 10 m ahead of the camera, is beyond it
+  params.map.max_extent_m = 5.0;  // the wall, 12 m ahead of the camera, is beyond it
   params.prune_period_s = 2.0;
   FrameMapping mapping{DisparityMapperParameters()};
   MapFusion fusion{params};
