@@ -4,6 +4,10 @@
 #include <ros/message_traits.h>
 #include <ros/service_traits.h>
 
+#include <array>
+#include <cmath>
+#include <set>
+
 #include "stereo_occupancy/BoundingBoxQuery.h"
 #include "stereo_occupancy/GetOctomap.h"
 #include "stereo_occupancy/ros/conversions.h"
@@ -246,27 +250,69 @@ TEST(Conversions, ProjectedMapToOccupancyGrid) {
 }
 
 // A block's marker holds the block's occupied cells, a coarse leaf's cells
-// inside the block included; an emptied block is a DELETE; the whole map
-// starts with a DELETEALL.
+// inside the block included (a leaf larger than the block gives the block's
+// part of it); an emptied block is a DELETE; the whole map starts with a
+// DELETEALL.
 TEST(Conversions, BlockMarkers) {
   octomap::OcTree tree(0.25);
   tree.updateNode(octomap::point3d(0.125f, 0.125f, 0.125f), true);   // global cell (0, 0, 0): block (0, 0, 0)
-  tree.updateNode(octomap::point3d(4.125f, 0.125f, 0.125f), true);   // cell (16, 0, 0): block (1, 0, 0)
   tree.updateNode(octomap::point3d(0.375f, 0.125f, 0.125f), false);  // free: not drawn
+  // Block (1, 0, 0): cells (16..17, 0..1, 0..1) occupied, pruned to one leaf of 2 cells a side.
+  for (int i = 0; i < 8; ++i)
+    tree.updateNode(octomap::point3d(4.125f + 0.25f * (i & 1), 0.125f + 0.25f * ((i >> 1) & 1),
+                                     0.125f + 0.25f * (i >> 2)),
+                    true);
+  // Cells (32..63)^3 occupied, pruned to one leaf of 32 cells a side: blocks (2..3, 2..3, 2..3).
+  for (int i = 0; i < 32 * 32 * 32; ++i)
+    tree.updateNode(octomap::point3d(8.125f + 0.25f * (i % 32), 8.125f + 0.25f * ((i / 32) % 32),
+                                     8.125f + 0.25f * (i / 1024)),
+                    true);
+  tree.prune();
+  std::multiset<double> leaf_sides;
+  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) leaf_sides.insert(it.getSize());
+  ASSERT_EQ(leaf_sides, (std::multiset<double>{0.25, 0.25, 0.5, 8.0})) << "the coarse leaves were not built";
   std_msgs::Header header;
   header.frame_id = "map";
   visualization_msgs::MarkerArray markers;
-  blockMarkers(tree, {Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(1, 0, 0), Eigen::Vector3i(5, 5, 5)}, true, header,
-               &markers);
-  ASSERT_EQ(markers.markers.size(), 4u);
+  blockMarkers(tree, {Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(1, 0, 0), Eigen::Vector3i(3, 2, 2),
+                      Eigen::Vector3i(5, 5, 5)},
+               true, header, &markers);
+  ASSERT_EQ(markers.markers.size(), 5u);
   EXPECT_EQ(markers.markers[0].action, visualization_msgs::Marker::DELETEALL);
-  EXPECT_EQ(markers.markers[1].action, visualization_msgs::Marker::ADD);
-  ASSERT_EQ(markers.markers[1].points.size(), 1u);
-  EXPECT_DOUBLE_EQ(markers.markers[1].points[0].x, 0.125);
-  EXPECT_EQ(markers.markers[2].points.size(), 1u);
-  EXPECT_NE(markers.markers[1].id, markers.markers[2].id);
-  EXPECT_EQ(markers.markers[3].action, visualization_msgs::Marker::DELETE);  // a block without occupied cells
-  EXPECT_EQ(markers.markers[1].ns, "occupied_cells_z0");
+  // The centres of a marker's cubes, in cells (global index), and the colours' count.
+  auto cellsOf = [](const visualization_msgs::Marker& m) {
+    EXPECT_EQ(m.colors.size(), m.points.size()) << m.ns << " " << m.id;
+    std::set<std::array<double, 3>> cells;
+    for (const auto& p : m.points) cells.insert({p.x / 0.25 - 0.5, p.y / 0.25 - 0.5, p.z / 0.25 - 0.5});
+    EXPECT_EQ(cells.size(), m.points.size()) << "a cell drawn twice in " << m.ns << " " << m.id;
+    return cells;
+  };
+  const auto& single = markers.markers[1];
+  EXPECT_EQ(single.action, visualization_msgs::Marker::ADD);
+  EXPECT_EQ(single.ns, "occupied_cells_z0");
+  EXPECT_DOUBLE_EQ(single.scale.x, 0.25);
+  EXPECT_EQ(cellsOf(single), (std::set<std::array<double, 3>>{{0, 0, 0}}));
+  // The 2-cell leaf: its eight cells.
+  const auto& coarse = markers.markers[2];
+  EXPECT_EQ(coarse.action, visualization_msgs::Marker::ADD);
+  EXPECT_EQ(coarse.ns, "occupied_cells_z0");
+  EXPECT_NE(coarse.id, single.id);
+  std::set<std::array<double, 3>> eight;
+  for (int i = 0; i < 8; ++i) eight.insert({16.0 + (i & 1), static_cast<double>((i >> 1) & 1), static_cast<double>(i >> 2)});
+  EXPECT_EQ(cellsOf(coarse), eight);
+  // The 32-cell leaf: the 16^3 cells of block (3, 2, 2) that it covers, and no others.
+  const auto& part = markers.markers[3];
+  EXPECT_EQ(part.action, visualization_msgs::Marker::ADD);
+  EXPECT_EQ(part.ns, "occupied_cells_z2");
+  const auto drawn = cellsOf(part);  // distinct cells: 16^3 of them inside the block are all of it
+  EXPECT_EQ(drawn.size(), 16u * 16u * 16u);
+  size_t inside = 0;
+  for (const auto& c : drawn)
+    inside += c[0] >= 48 && c[0] <= 63 && c[1] >= 32 && c[1] <= 47 && c[2] >= 32 && c[2] <= 47 &&
+              c[0] == std::floor(c[0]) && c[1] == std::floor(c[1]) && c[2] == std::floor(c[2]);
+  EXPECT_EQ(inside, drawn.size());
+  EXPECT_EQ(markers.markers[4].action, visualization_msgs::Marker::DELETE);  // a block without occupied cells
+  EXPECT_TRUE(markers.markers[4].points.empty());
 }
 
 // A block's free leaves by size: a fine free cell in its own marker, a leaf
