@@ -215,19 +215,39 @@ TEST(ParameterTable, TheCfgHasTheTablesDefaultsAndRanges) {
   DisparityMapperConfig::__getMax__().__toMessage__(max);
   DisparityMapperConfig::__getDefault__().__toMessage__(defaults);
   ASSERT_FALSE(defaults.doubles.empty());
+  ASSERT_FALSE(defaults.ints.empty());
   for (size_t i = 0; i < defaults.doubles.size(); ++i) {
     const std::string& name = defaults.doubles[i].name;
     const auto it = rows.find(name);
     ASSERT_NE(it, rows.end()) << name << " of the .cfg is not in the table";
+    EXPECT_TRUE(it->second.is_number && !it->second.is_integer) << name << " is a double in the .cfg only";
     EXPECT_EQ(defaults.doubles[i].value, it->second.number) << name;
     EXPECT_EQ(min.doubles[i].value, it->second.spec.min) << name;
     EXPECT_EQ(max.doubles[i].value, it->second.spec.max) << name;
   }
+  for (size_t i = 0; i < defaults.ints.size(); ++i) {
+    const std::string& name = defaults.ints[i].name;
+    const auto it = rows.find(name);
+    ASSERT_NE(it, rows.end()) << name << " of the .cfg is not in the table";
+    EXPECT_TRUE(it->second.is_integer) << name << " is an int in the .cfg only";
+    EXPECT_EQ(defaults.ints[i].value, it->second.number) << name;
+    EXPECT_EQ(min.ints[i].value, it->second.spec.min) << name;
+    EXPECT_EQ(max.ints[i].value, it->second.spec.max) << name;
+  }
+  for (const auto& entry : defaults.bools) {
+    const auto it = rows.find(entry.name);
+    ASSERT_NE(it, rows.end()) << entry.name << " of the .cfg is not in the table";
+    EXPECT_EQ(entry.value ? "true" : "false", it->second.text) << entry.name;
+  }
   for (const auto& entry : defaults.strs) {
     const auto it = rows.find(entry.name);
     ASSERT_NE(it, rows.end()) << entry.name << " of the .cfg is not in the table";
+    EXPECT_FALSE(it->second.is_number) << entry.name << " is a string in the .cfg only";
     EXPECT_EQ(entry.value, it->second.text) << entry.name;
   }
+  // Every parameter of the .cfg was one of those compared.
+  EXPECT_EQ(defaults.doubles.size() + defaults.ints.size() + defaults.bools.size() + defaults.strs.size(),
+            DisparityMapperConfig::__getParamDescriptions__().size());
   // The server shows the values in use: the table's names map them both ways.
   DisparityMapperParameters params;
   params.drawing.sensor_model.k_m = 0.25;
