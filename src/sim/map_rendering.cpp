@@ -133,10 +133,12 @@ void renderMapViews(const octomap::OcTree& map, double pixels_per_m, cv::Mat* to
     const double half = 0.5 * it.getSize();
     const int u0 = margin + static_cast<int>((it.getX() - half - x0) * pixels_per_m);
     const int u1 = std::max(u0 + 1, margin + static_cast<int>((it.getX() + half - x0) * pixels_per_m));
-    const int vt0 = h_top - 1 - (margin + static_cast<int>((it.getY() + half - y0) * pixels_per_m));
-    const int vt1 = std::max(vt0 + 1, h_top - 1 - (margin + static_cast<int>((it.getY() - half - y0) * pixels_per_m)));
-    const int vs0 = h_side - 1 - (margin + static_cast<int>((it.getZ() + half - z0) * pixels_per_m));
-    const int vs1 = std::max(vs0 + 1, h_side - 1 - (margin + static_cast<int>((it.getZ() - half - z0) * pixels_per_m)));
+    // Rows counted up from the plot's bottom: a cell from y to y + s fills
+    // rows [h - margin - (y + s), h - margin - y), level with the axis' ticks.
+    const int vt0 = h_top - (margin + static_cast<int>((it.getY() + half - y0) * pixels_per_m));
+    const int vt1 = std::max(vt0 + 1, h_top - (margin + static_cast<int>((it.getY() - half - y0) * pixels_per_m)));
+    const int vs0 = h_side - (margin + static_cast<int>((it.getZ() + half - z0) * pixels_per_m));
+    const int vs1 = std::max(vs0 + 1, h_side - (margin + static_cast<int>((it.getZ() - half - z0) * pixels_per_m)));
     const cv::Vec3b colour = heightColour(it.getZ(), z0, e.hi[2]);
     for (int u = std::max(u0, 0); u < std::min(u1, w); ++u) {
       for (int v = std::max(vt0, 0); v < std::min(vt1, h_top); ++v) {
