@@ -17,6 +17,7 @@
 #include <sys/stat.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -29,6 +30,7 @@
 
 #include "stereo_occupancy/BoundingBoxQuery.h"
 #include "stereo_occupancy/GetOctomap.h"
+#include "stereo_occupancy/OccupancyUpdate.h"
 #include "stereo_occupancy/Octomap.h"
 #include "stereo_occupancy/ros/conversions.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
@@ -234,34 +236,108 @@ TEST_F(OctomapServerTest, MarkersCarryOnlyTheChangedBlocks) {
   ASSERT_TRUE(waitFor(mutex_, both, 10.0));
   // The blocks a message carries: a free block has one marker per leaf size
   // ("free_cells_z<bz>_s<side>"), an occupied block one ("occupied_cells_z<bz>").
-  auto blocks = [](const visualization_msgs::MarkerArray& msg) {
-    std::set<std::pair<std::string, int>> b;
+  using Block = std::pair<std::string, int>;  // "<kind>_cells_z<bz>", id (from bx, by)
+  auto blocksOf = [](const visualization_msgs::MarkerArray& msg) {
+    std::set<Block> b;
     for (const auto& m : msg.markers)
       if (m.action != visualization_msgs::Marker::DELETEALL) b.emplace(m.ns.substr(0, m.ns.rfind("_s")), m.id);
-    return b.size();
+    return b;
   };
-  std::map<std::string, size_t> whole;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    for (auto& [topic, messages] : received) {
+    for (const auto& [topic, messages] : received)
       ASSERT_EQ(messages.front()->markers.front().action, visualization_msgs::Marker::DELETEALL) << topic;
-      for (const auto& msg : messages) whole[topic] = std::max(whole[topic], blocks(*msg));
-      messages.clear();
-    }
   }
-  // One more frame of the same wall changes some blocks: messages of those only.
-  mapTheWall();
-  ASSERT_TRUE(waitFor(mutex_, both, 10.0));
+  // Until the wall's last frames are fused and published (5 Hz): quiet for a second.
+  std::map<std::string, std::set<Block>> whole;
+  const ros::WallTime quiet_until = ros::WallTime::now() + ros::WallDuration(20.0);
+  for (bool quiet = false; !quiet && ros::WallTime::now() < quiet_until;) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      quiet = received["occupied_cells_vis_array"].empty() && received["free_cells_vis_array"].empty();
+      for (auto& [topic, messages] : received) {
+        for (const auto& msg : messages) {
+          const auto b = blocksOf(*msg);
+          whole[topic].insert(b.begin(), b.end());
+        }
+        messages.clear();
+      }
+    }
+    if (!quiet) ros::WallDuration(1.0).sleep();
+  }
+  ASSERT_GT(whole["occupied_cells_vis_array"].size(), 4u) << "the wall's blocks";
+  ASSERT_GT(whole["free_cells_vis_array"].size(), 4u);
+
+  // An update of 4 x 4 x 4 occupied cells from global cell (14, 40, 8), away
+  // from the wall and its free space: the blocks (0, 2, 0) and (1, 2, 0) of
+  // 16 cells change, and nothing else.
+  ros::Publisher update_pub = nh_.advertise<OccupancyUpdate>("/occupancy_update", 1);
+  const ros::WallTime until = ros::WallTime::now() + ros::WallDuration(10.0);
+  while (update_pub.getNumSubscribers() == 0 && ros::WallTime::now() < until) ros::WallDuration(0.05).sleep();
+  ASSERT_GT(update_pub.getNumSubscribers(), 0u) << "the accumulator did not subscribe";
+  OccupancyUpdate small;
+  small.header.frame_id = "map";
+  small.header.stamp = ros::Time::now();
+  small.resolution = 0.25;
+  const int origin[3] = {14, 40, 8};
+  for (int a = 0; a < 3; ++a) {
+    small.origin_index[a] = origin[a];
+    small.size[a] = 4;
+  }
+  small.sensor_origin.x = 4.0, small.sensor_origin.y = 10.5, small.sensor_origin.z = 2.5;
+  small.run_start = {0};
+  small.run_length = {64};
+  small.log_odds.assign(64, 1.5f);
+  update_pub.publish(small);
+  ASSERT_TRUE(waitFor(mutex_, both, 10.0)) << "no markers after the update";
+  ros::WallDuration(1.0).sleep();  // any further message would go out within 0.2 s
   std::lock_guard<std::mutex> lock(mutex_);
-  for (const auto& [topic, messages] : received) {
-    const std::string ns = topic == "free_cells_vis_array" ? "free_cells_z" : "occupied_cells_z";
-    for (const auto& msg : messages) {
-      ASSERT_FALSE(msg->markers.empty()) << topic;
-      EXPECT_NE(msg->markers.front().action, visualization_msgs::Marker::DELETEALL) << topic;
-      EXPECT_LE(blocks(*msg), whole[topic]) << topic;
-      for (const auto& m : msg->markers) EXPECT_EQ(m.ns.rfind(ns, 0), 0u) << m.ns;
+  // The occupied markers: the update's 64 cells, each block's in its own
+  // marker, two blocks of z block 0; no DELETEALL (that is the whole map).
+  std::set<std::array<int, 3>> cells;
+  std::set<Block> changed;
+  size_t whole_map_messages = 0, mixed_markers = 0;
+  for (const auto& msg : received["occupied_cells_vis_array"]) {
+    whole_map_messages += !msg->markers.empty() && msg->markers.front().action == visualization_msgs::Marker::DELETEALL;
+    for (const auto& m : msg->markers) {
+      std::set<std::array<int, 3>> blocks_of_points;
+      for (const auto& p : m.points) {
+        const std::array<int, 3> g = {static_cast<int>(std::floor(p.x / 0.25)), static_cast<int>(std::floor(p.y / 0.25)),
+                                      static_cast<int>(std::floor(p.z / 0.25))};
+        cells.insert(g);
+        blocks_of_points.insert({g[0] >> 4, g[1] >> 4, g[2] >> 4});
+      }
+      mixed_markers += blocks_of_points.size() > 1;
     }
+    const auto b = blocksOf(*msg);
+    changed.insert(b.begin(), b.end());
   }
+  const size_t whole_blocks = whole["occupied_cells_vis_array"].size();
+  EXPECT_EQ(whole_map_messages, 0u);
+  EXPECT_EQ(changed.size(), 2u) << "blocks sent after the update; the map has " << whole_blocks;
+  EXPECT_EQ(std::count_if(changed.begin(), changed.end(), [](const Block& b) { return b.first != "occupied_cells_z0"; }),
+            0) << "blocks outside z block 0";
+  EXPECT_EQ(mixed_markers, 0u) << "markers with the cells of more than one block";
+  size_t updated = 0;
+  for (const auto& g : cells)
+    updated += g[0] >= origin[0] && g[0] < origin[0] + 4 && g[1] >= origin[1] && g[1] < origin[1] + 4 &&
+               g[2] >= origin[2] && g[2] < origin[2] + 4;
+  EXPECT_EQ(updated, 64u) << "of the update's cells are drawn";
+  EXPECT_EQ(cells.size(), 64u) << "cells drawn after the update (the update has 64)";
+  // The free markers: the same two blocks (no free leaf in them: DELETEs), nothing else.
+  std::set<Block> free_changed;
+  size_t free_whole_map_messages = 0, free_cells_drawn = 0;
+  for (const auto& msg : received["free_cells_vis_array"]) {
+    free_whole_map_messages +=
+        !msg->markers.empty() && msg->markers.front().action == visualization_msgs::Marker::DELETEALL;
+    for (const auto& m : msg->markers) free_cells_drawn += m.points.size();
+    for (const auto& [ns, id] : blocksOf(*msg)) free_changed.emplace("occupied" + ns.substr(4), id);
+  }
+  EXPECT_EQ(free_whole_map_messages, 0u);
+  EXPECT_EQ(free_changed.size(), 2u) << "blocks sent after the update; the map has "
+                                     << whole["free_cells_vis_array"].size();
+  EXPECT_TRUE(free_changed == changed) << "the free markers' blocks are not the occupied ones'";
+  EXPECT_EQ(free_cells_drawn, 0u);
 }
 
 // map_file: an accumulator loaded into the running manager with a saved map
