@@ -139,9 +139,21 @@ void OctomapAccumulator::onInit() {
   snapshot.projection_max_z_m = params_.projection_max_z_m;
   snapshot_ = std::make_unique<MapSnapshot>(snapshot);
 
-  // octomap_server's names and types, latched as there.
-  octomap_pub_ = nh.advertise<Octomap>("octomap_binary", 1, /*latch=*/true);
-  octomap_full_pub_ = nh.advertise<Octomap>("octomap_full", 1, /*latch=*/true);
+  // octomap_server's names and types, latched as there. An output that had
+  // no subscriber when the whole map went out holds nothing to latch: a new
+  // subscriber makes the whole map due again (within full_map_period_s),
+  // whatever the other outputs' subscribers got before.
+  const auto whole_map_due = [this](const ros::SingleSubscriberPublisher&) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    full_changed_ = true;
+  };
+  const auto latched = [&](const std::string& topic, auto message) {
+    using Message = decltype(message);
+    return nh.advertise<Message>(topic, 1, whole_map_due, ros::SubscriberStatusCallback(), ros::VoidConstPtr(),
+                                 /*latch=*/true);
+  };
+  octomap_pub_ = latched("octomap_binary", Octomap());
+  octomap_full_pub_ = latched("octomap_full", Octomap());
   // Occupied and free cells a block at a time, only the blocks changed since
   // the last publish; a new subscriber gets the whole map first.
   const auto whole_map_for_new_subscriber = [this](const ros::SingleSubscriberPublisher&) {
@@ -154,8 +166,8 @@ void OctomapAccumulator::onInit() {
                                                                whole_map_for_new_subscriber);
   free_markers_pub_ =
       nh.advertise<visualization_msgs::MarkerArray>("free_cells_vis_array", 10, whole_map_for_new_subscriber);
-  cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("octomap_point_cloud_centers", 1, /*latch=*/true);
-  projected_pub_ = nh.advertise<nav_msgs::OccupancyGrid>("projected_map", 1, /*latch=*/true);
+  cloud_pub_ = latched("octomap_point_cloud_centers", sensor_msgs::PointCloud2());
+  projected_pub_ = latched("projected_map", nav_msgs::OccupancyGrid());
   octomap_binary_srv_ = nh.advertiseService<GetOctomap::Request, GetOctomap::Response>(
       "octomap_binary", [this](GetOctomap::Request& q, GetOctomap::Response& r) { return getMap(true, q, r); });
   octomap_full_srv_ = nh.advertiseService<GetOctomap::Request, GetOctomap::Response>(

@@ -59,28 +59,35 @@ MaintainResult MissionMap::maintain() {
     mergeChangedTiles(&result);
     return result;
   }
-  Eigen::AlignedBox3d window = live_.keptBox();
-  if (!window.isEmpty() && live_.config().max_extent_m > 0.0) {
-    const double slack_m = MapAccumulator::kPruneSlack * live_.config().max_extent_m;
-    window = Eigen::AlignedBox3d(window.min().array() - slack_m, window.max().array() + slack_m);
+  const Eigen::AlignedBox3d kept = window();
+  if (!kept.isEmpty() && live_.config().max_extent_m > 0.0) {
     const std::vector<uint64_t> resident(resident_.begin(), resident_.end());
-    for (uint64_t key : resident) {
-      const TileIndex tile = TileStore::unpack(key);
-      if (window.intersects(live_.tileBox(tile))) continue;
-      // Unchanged since the store had it: its copy is current.
-      if (unsaved_.erase(key)) {
-        if (unmerged_.erase(key) && live_.config().compress_map) result.nodes_merged += live_.mergeEqualLeaves(tile);
-        store_->put(tile, live_.tileLeaves(tile));
-      }
-      if (live_.dropTile(tile) > 0) ++result.tiles_stored;
-      resident_.erase(key);
-      unmerged_.erase(key);
-      unpublished_.insert(key);
-    }
+    for (uint64_t key : resident)
+      if (!kept.intersects(live_.tileBox(TileStore::unpack(key)))) storeTile(key, &result);
   }
   mergeChangedTiles(&result);
   freed_memory_ = freed_memory_ || result.tiles_stored > 0 || result.nodes_merged > 0;
   return result;
+}
+
+Eigen::AlignedBox3d MissionMap::window() const {
+  Eigen::AlignedBox3d kept = live_.keptBox();
+  if (kept.isEmpty()) return kept;
+  const double slack_m = MapAccumulator::kPruneSlack * live_.config().max_extent_m;
+  return Eigen::AlignedBox3d(kept.min().array() - slack_m, kept.max().array() + slack_m);
+}
+
+void MissionMap::storeTile(uint64_t key, MaintainResult* result) {
+  const TileIndex tile = TileStore::unpack(key);
+  // Unchanged since the store had it: its copy is current.
+  if (unsaved_.erase(key)) {
+    if (unmerged_.erase(key) && live_.config().compress_map) result->nodes_merged += live_.mergeEqualLeaves(tile);
+    store_->put(tile, live_.tileLeaves(tile));
+  }
+  if (live_.dropTile(tile) > 0) ++result->tiles_stored;
+  resident_.erase(key);
+  unmerged_.erase(key);
+  unpublished_.insert(key);
 }
 
 void MissionMap::mergeChangedTiles(MaintainResult* result) {
@@ -150,11 +157,18 @@ size_t MissionMap::clearBox(const Eigen::Vector3d& W_min, const Eigen::Vector3d&
   size_t cleared = 0;
   if (store_) {
     const Eigen::AlignedBox3d box(W_min, W_max);
+    const Eigen::AlignedBox3d kept = window();
+    const bool unbounded = live_.config().max_extent_m <= 0.0;
     for (const TileIndex& tile : store_->tiles()) {
-      if (resident_.count(TileStore::pack(tile)) || !box.intersects(live_.tileBox(tile))) continue;
+      const uint64_t key = TileStore::pack(tile);
+      if (resident_.count(key) || !box.intersects(live_.tileBox(tile))) continue;
       makeResident(tile);
       cleared += live_.clearBox(W_min, W_max);  // costs the box's leaves in the live map
-      maintain();                                // back to the store unless in the window
+      collectDirtyTiles();
+      // Back to the store unless the window holds it; before the first
+      // update there is no window, and no tile stays for a clear alone.
+      MaintainResult ignored;
+      if (!unbounded && (kept.isEmpty() || !kept.intersects(live_.tileBox(tile)))) storeTile(key, &ignored);
     }
   }
   return cleared + live_.clearBox(W_min, W_max);

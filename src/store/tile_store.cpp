@@ -1,6 +1,7 @@
 #include "stereo_occupancy/store/tile_store.h"
 
 #include <sqlite3.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -8,6 +9,8 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
+#include <random>
 #include <sstream>
 #include <stdexcept>
 
@@ -20,6 +23,11 @@ namespace {
 
 /// Bumped when a tile's row changes meaning; a database of another format is refused.
 constexpr const char* kFormat = "stereo_occupancy tiles 1";
+/// The SQLite file header's size and where it keeps PRAGMA application_id (big-endian).
+constexpr size_t kSqliteHeaderBytes = 100;
+constexpr size_t kApplicationIdOffset = 68;
+/// A -wal file no longer than its header holds no frame to replay.
+constexpr off_t kWalHeaderBytes = 32;
 /// A failed write is tried again after this long [ms].
 constexpr int kRetryMs = 1000;
 
@@ -140,10 +148,12 @@ TileStore::TileStore(const std::string& path, double resolution_m, Access access
     // an accumulator holds refuses (SQLite needs the shared-memory WAL index
     // to read a WAL database without writing it).
     if (!read_only) execute("PRAGMA locking_mode = EXCLUSIVE");
+    const uint32_t file_mission = missionIdInFile(path);  // before SQLite reads the -wal file
     if (sqlite3_exec(db_, read_only ? "BEGIN; SELECT count(*) FROM sqlite_master" : "BEGIN EXCLUSIVE", nullptr,
                      nullptr, nullptr) != SQLITE_OK)
       fail(sqlite3_errcode(db_) == SQLITE_BUSY ? "locked: another process has it open"
                                                 : std::string(sqlite3_errmsg(db_)));
+    checkWalBelongs(file_mission);
     openTables();  // before anything is written: another program's file stays as it was
     execute("COMMIT");
     if (!read_only) {
@@ -159,6 +169,29 @@ TileStore::TileStore(const std::string& path, double resolution_m, Access access
   writer_ = std::thread([this] { writerLoop(); });
 }
 
+uint32_t TileStore::missionIdInFile(const std::string& path) {
+  struct stat wal;
+  if (::stat((path + "-wal").c_str(), &wal) != 0 || wal.st_size <= kWalHeaderBytes) return 0;  // nothing to replay
+  std::ifstream file(path, std::ios::binary);
+  char header[kSqliteHeaderBytes];
+  if (!file.read(header, sizeof header) || std::memcmp(header, "SQLite format 3", 16) != 0) return 0;
+  const auto* b = reinterpret_cast<const unsigned char*>(header + kApplicationIdOffset);
+  return (uint32_t{b[0]} << 24) | (uint32_t{b[1]} << 16) | (uint32_t{b[2]} << 8) | b[3];  // big-endian
+}
+
+void TileStore::checkWalBelongs(uint32_t file_mission) {
+  if (file_mission == 0) return;  // no -wal file, or a database of before the mission id
+  Statement read(db_, "PRAGMA application_id");
+  if (sqlite3_step(read.get()) != SQLITE_ROW) throw std::runtime_error(sqlite3_errmsg(db_));
+  const uint32_t replayed = static_cast<uint32_t>(sqlite3_column_int64(read.get(), 0));
+  if (replayed == file_mission) return;
+  // Closing would checkpoint the foreign log into the database: not this one.
+  sqlite3_db_config(db_, SQLITE_DBCONFIG_NO_CKPT_ON_CLOSE, 1, nullptr);
+  throw std::runtime_error("its -wal file belongs to another database (mission " + std::to_string(replayed) +
+                           ", this one " + std::to_string(file_mission) + "); nothing was changed: move '" + path_ +
+                           "-wal' away to open the database as it was last written whole");
+}
+
 void TileStore::openTables() {
   std::vector<std::string> tables;
   {
@@ -172,6 +205,7 @@ void TileStore::openTables() {
   if (tables.empty()) {
     if (resolution_m_ <= 0.0) throw std::runtime_error("not a tile database (empty)");
     if (access_ == Access::kReadOnly) throw std::runtime_error("not a tile database (empty)");
+    setMissionId();
     execute("CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL)");
     execute("CREATE TABLE tiles (x INTEGER NOT NULL, y INTEGER NOT NULL, z INTEGER NOT NULL, "
             "leaves INTEGER NOT NULL, octree BLOB NOT NULL, PRIMARY KEY (x, y, z)) WITHOUT ROWID");
@@ -205,9 +239,20 @@ void TileStore::openTables() {
     throw std::runtime_error("its tiles have " + meta["resolution_m"] + " m cells, the map " +
                              std::to_string(resolution_m_) + " m");
   }
+  if (access_ == Access::kReadWrite) {
+    Statement id(db_, "PRAGMA application_id");
+    if (sqlite3_step(id.get()) == SQLITE_ROW && sqlite3_column_int64(id.get(), 0) == 0) setMissionId();
+  }
   if (access_ == Access::kReadWrite)
     execute("CREATE TABLE IF NOT EXISTS damaged_tiles (x INTEGER NOT NULL, y INTEGER NOT NULL, z INTEGER NOT NULL, "
             "octree BLOB, reason TEXT NOT NULL)");
+}
+
+void TileStore::setMissionId() {
+  std::random_device random;
+  uint32_t id = 0;
+  while (id == 0 || id > 0x7fffffffu) id = random();  // positive: PRAGMA application_id takes a signed 32-bit value
+  execute(("PRAGMA application_id = " + std::to_string(id)).c_str());
 }
 
 void TileStore::checkRows() {
@@ -473,6 +518,9 @@ bool TileStore::write(const std::vector<Queued>& batch, uint64_t generation, std
   if (generation != generation_) return true;  // cleared since the batch was taken
   try {
     execute("BEGIN IMMEDIATE");
+    // Page 1, which holds the mission id, goes into the log with every
+    // commit: a log replayed onto another mission's database shows itself.
+    execute(("PRAGMA user_version = " + std::to_string(++commits_ & 0x7fffffff)).c_str());
     Statement upsert(db_, "INSERT OR REPLACE INTO tiles (x, y, z, leaves, octree) VALUES (?, ?, ?, ?, ?)");
     Statement erase(db_, "DELETE FROM tiles WHERE x = ? AND y = ? AND z = ?");
     for (size_t i = 0; i < batch.size(); ++i) {

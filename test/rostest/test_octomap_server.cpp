@@ -20,6 +20,8 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
+#include <iterator>
 #include <memory>
 #include <map>
 #include <mutex>
@@ -419,5 +421,110 @@ TEST_F(OctomapServerTest, ARestartedAccumulatorContinuesFromItsDatabase) {
   const octomap::OcTreeNode* n = saved.search(12.1, 0.1, 2.1);
   ASSERT_NE(n, nullptr) << "the restarted accumulator's save lacks the wall of its database";
   EXPECT_TRUE(saved.isNodeOccupied(n));
+  EXPECT_TRUE(ros::service::call("/stereo_occupancy_manager/unload_nodelet", unload));
+}
+
+// A map that no longer changes (started from map_file, hovering): a planner
+// that subscribes to projected_map or octomap_binary after rviz's markers
+// got the whole map still gets it within full_map_period_s, and in the
+// other order too; a latched topic then holds it for the next subscriber.
+TEST_F(OctomapServerTest, ALateSubscriberGetsTheWholeMapInEitherOrder) {
+  mapTheWall();
+  ::mkdir("/tmp/stereo_occupancy_octomap_server", 0755);
+  std_srvs::Trigger save;
+  ASSERT_TRUE(ros::service::call("/octomap_accumulator/save_map", save));
+  ASSERT_TRUE(save.response.success) << save.response.message;
+  for (const bool rviz_first : {true, false}) {
+    const std::string name = rviz_first ? "/hover_rviz_first" : "/hover_planner_first";
+    nh_.setParam(name + "/full_map_period_s", 0.5);
+    nh_.setParam(name + "/map_file", "/tmp/stereo_occupancy_octomap_server/stereo_occupancy_map.ot");
+    nh_.setParam(name + "/world_frame", "map");
+    nodelet::NodeletLoad load = accumulatorLoad(name, /*own_input=*/true);  // no updates reach it
+    ASSERT_TRUE(ros::service::call("/stereo_occupancy_manager/load_nodelet", load));
+    ASSERT_TRUE(load.response.success);
+    visualization_msgs::MarkerArrayConstPtr markers;
+    OctomapConstPtr octomap, latched;
+    nav_msgs::OccupancyGridConstPtr projected;
+    ros::Subscriber rviz, planner, planner_grid, late;
+    auto subscribeRviz = [&] {
+      rviz = nh_.subscribe<visualization_msgs::MarkerArray>(
+          name + "/occupied_cells_vis_array", 10, [&](const visualization_msgs::MarkerArrayConstPtr& msg) {
+            std::lock_guard<std::mutex> lock(mutex_);
+            markers = msg;
+          });
+    };
+    auto subscribePlanner = [&] {
+      planner = nh_.subscribe<Octomap>(name + "/octomap_binary", 1, [&](const OctomapConstPtr& msg) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        octomap = msg;
+      });
+    };
+    if (rviz_first) {
+      subscribeRviz();
+      ASSERT_TRUE(waitFor(mutex_, [&] { return markers != nullptr; }, 20.0)) << name << ": rviz got no markers";
+      ros::WallDuration(1.5).sleep();  // the whole map went out, to rviz alone
+      subscribePlanner();
+    } else {
+      subscribePlanner();
+      ASSERT_TRUE(waitFor(mutex_, [&] { return octomap != nullptr; }, 20.0)) << name << ": the planner got no map";
+      ros::WallDuration(1.5).sleep();
+      subscribeRviz();
+    }
+    planner_grid = nh_.subscribe<nav_msgs::OccupancyGrid>(name + "/projected_map", 1,
+                                                          [&](const nav_msgs::OccupancyGridConstPtr& msg) {
+                                                            std::lock_guard<std::mutex> lock(mutex_);
+                                                            projected = msg;
+                                                          });
+    EXPECT_TRUE(waitFor(mutex_, [&] { return holdsTheWall(octomap); }, 5.0)) << name << ": octomap_binary";
+    EXPECT_TRUE(waitFor(mutex_, [&] { return markers != nullptr; }, 5.0)) << name << ": markers";
+    EXPECT_TRUE(waitFor(mutex_,
+                        [&] { return projected && std::count(projected->data.begin(), projected->data.end(), 100) > 20; },
+                        5.0))
+        << name << ": projected_map without the wall";
+    // Latched: the next subscriber gets the last map at once, with no new publication due.
+    late = nh_.subscribe<Octomap>(name + "/octomap_binary", 1, [&](const OctomapConstPtr& msg) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      latched = msg;
+    });
+    EXPECT_TRUE(waitFor(mutex_, [&] { return holdsTheWall(latched); }, 2.0)) << name << ": nothing latched";
+    nodelet::NodeletUnload unload;
+    unload.request.name = name;
+    EXPECT_TRUE(ros::service::call("/stereo_occupancy_manager/unload_nodelet", unload));
+  }
+}
+
+// An accumulator whose database another holds maps without it; its save then
+// answers false and writes the live map aside, never over the mission's files
+// (a locked database once replaced a 66 049-cell mission's .bt with 0 cells).
+TEST_F(OctomapServerTest, ASaveWithoutItsDatabaseKeepsTheMissionsFiles) {
+  mapTheWall();
+  const std::string dir = "/tmp/stereo_occupancy_octomap_server";
+  ::mkdir(dir.c_str(), 0755);
+  std_srvs::Trigger save;
+  ASSERT_TRUE(ros::service::call("/octomap_accumulator/save_map", save));
+  ASSERT_TRUE(save.response.success) << save.response.message;
+  const auto bytes = [](const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  };
+  const std::string mission_bt = bytes(dir + "/stereo_occupancy_map.bt");
+  ASSERT_GT(mission_bt.size(), 100u);
+  std::remove((dir + "/stereo_occupancy_map_live_only.bt").c_str());
+  nh_.setParam("/second/save_dir", dir);  // the main accumulator holds <dir>/stereo_occupancy_map.db
+  nh_.setParam("/second/world_frame", "map");
+  nodelet::NodeletLoad load = accumulatorLoad("/second", /*own_input=*/true);
+  ASSERT_TRUE(ros::service::call("/stereo_occupancy_manager/load_nodelet", load));
+  ASSERT_TRUE(load.response.success);
+  ASSERT_TRUE(ros::service::waitForService("/second/save_map", ros::Duration(10.0)));
+  std_srvs::Trigger second_save;
+  ASSERT_TRUE(ros::service::call("/second/save_map", second_save));
+  EXPECT_FALSE(second_save.response.success) << second_save.response.message;
+  EXPECT_NE(second_save.response.message.find("locked"), std::string::npos) << second_save.response.message;
+  EXPECT_NE(second_save.response.message.find("stereo_occupancy_map_live_only.bt"), std::string::npos)
+      << second_save.response.message;
+  EXPECT_TRUE(bytes(dir + "/stereo_occupancy_map.bt") == mission_bt) << "the mission's .bt was replaced";
+  EXPECT_TRUE(std::ifstream(dir + "/stereo_occupancy_map_live_only.bt").good());
+  nodelet::NodeletUnload unload;
+  unload.request.name = "/second";
   EXPECT_TRUE(ros::service::call("/stereo_occupancy_manager/unload_nodelet", unload));
 }

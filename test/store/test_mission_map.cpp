@@ -227,6 +227,41 @@ TEST(MissionMap, ClearBoxReachesTheTilesOnDisk) {
   EXPECT_EQ(occupiedLeaves(mission.live().tree()), half) << "the live stretch: the same";
 }
 
+// A mission continued from its database, before the first update: there is
+// no window yet, so a clear_bbx brings each tile it touches back only for
+// the clear. One that finds nothing occupied leaves nothing in RAM (it left
+// every tile there), one that clears puts the cleared tile back.
+TEST(MissionMap, ClearBoxBeforeTheFirstUpdateLeavesNothingInRam) {
+  MapAccumulatorConfig windowed;
+  windowed.max_extent_m = 40.0;
+  const std::string path = freshDatabase("clear_before_update");
+  {
+    MissionMap flown(windowed);
+    flown.attachStore(std::make_shared<TileStore>(path, kRes));
+    for (int i = 0; i < 2 * static_cast<int>(MapAccumulator::kPruneOrigins); ++i)
+      ASSERT_TRUE(flown.integrate(singleCell(Eigen::Vector3i(i % 40, i % 7, i % 2), i % 2 ? 2.0f : -2.0f)));
+    flown.checkpoint();
+    ASSERT_TRUE(flown.store()->flush());
+  }
+  MissionMap continued(windowed);
+  continued.attachStore(std::make_shared<TileStore>(path, kRes));
+  ASSERT_FALSE(continued.store()->tiles().empty());
+  // Free cells only (z index 0 holds the even i's, all free): nothing to clear.
+  EXPECT_EQ(continued.clearBox(Eigen::Vector3d(-100.0, -100.0, 0.0), Eigen::Vector3d(100.0, 100.0, 0.2)), 0u);
+  EXPECT_EQ(continued.live().tree().getNumLeafNodes(), 0u) << "tiles stayed in RAM after a clear that found nothing";
+  EXPECT_TRUE(continued.live().tiles().empty());
+  const size_t occupied = continued.clearBox(Eigen::Vector3d(-100.0, -100.0, -100.0), Eigen::Vector3d(100.0, 100.0, 100.0));
+  EXPECT_EQ(occupied, MapAccumulator::kPruneOrigins);  // the odd i's: 100 distinct occupied cells
+  EXPECT_EQ(continued.live().tree().getNumLeafNodes(), 0u);
+  ASSERT_TRUE(continued.store()->flush());
+  const auto stored = MissionMap::assemble(*continued.store(), Eigen::AlignedBox3d());
+  EXPECT_EQ(occupiedLeaves(*stored), 0u) << "the cleared tile went back to the store cleared";
+  size_t known = 0;  // every cell flown is still known (free now), merged leaves or not
+  for (int i = 0; i < 2 * static_cast<int>(MapAccumulator::kPruneOrigins); ++i)
+    known += stored->search((i % 40 + 0.5) * kRes, (i % 7 + 0.5) * kRes, (i % 2 + 0.5) * kRes) != nullptr;
+  EXPECT_EQ(known, 2 * MapAccumulator::kPruneOrigins);
+}
+
 // maintain() merges the equal leaves of the tiles that changed: an 8-cell
 // cube of clamped free space becomes one leaf, in RAM and in the store, and
 // each cell keeps its value; with or without a store.
@@ -542,4 +577,51 @@ TEST(TileStore, RemoveDatabaseHonoursTheLock) {
   TileStore::removeDatabase(path);
   for (const char* suffix : {"", "-wal", "-shm"}) EXPECT_FALSE(std::ifstream(path + suffix).good()) << suffix;
   TileStore::removeDatabase(path);  // none: nothing to do
+}
+
+namespace {
+void copyFile(const std::string& from, const std::string& to) {
+  std::ofstream(to, std::ios::binary | std::ios::trunc) << fileBytes(from);
+}
+}  // namespace
+
+// A -wal file that another mission left beside a database is refused, and
+// nothing is changed (SQLite would have replayed it: 32 648 of 66 049
+// occupied cells lost); the database's own log, left by a kill -9, is
+// replayed as before, and with the foreign log moved away the database opens
+// as it was last written whole.
+TEST(TileStore, AnotherMissionsWalIsRefusedAndItsOwnIsReplayed) {
+  const std::string a = freshDatabase("wal_a"), b = freshDatabase("wal_b"), crashed = freshDatabase("wal_crashed");
+  const std::string foreign_log = ::testing::TempDir() + "/wal_a_log";
+  {
+    TileStore mission_a(a, kRes);
+    for (int x = 0; x < 3; ++x) mission_a.put(MapAccumulator::TileIndex(x, 0, 0), {tileLeaf({x, 0, 0}, 2.0f)});
+    ASSERT_TRUE(mission_a.flush());
+    // As a kill -9 leaves them: the database and its log, mid-mission.
+    copyFile(a + "-wal", foreign_log);
+    copyFile(a, crashed);
+    copyFile(a + "-wal", crashed + "-wal");
+  }
+  {
+    TileStore mission_b(b, kRes);
+    mission_b.put(MapAccumulator::TileIndex(7, 0, 0), {tileLeaf({7, 0, 0}, -2.0f)});
+    ASSERT_TRUE(mission_b.flush());
+  }
+  ASSERT_FALSE(std::ifstream(b + "-wal").good()) << "a clean close checkpoints and removes the log";
+  const std::string b_before = fileBytes(b);
+  copyFile(foreign_log, b + "-wal");
+  const std::string why = storeRefusal(b, kRes);
+  EXPECT_NE(why.find("its -wal file belongs to another database"), std::string::npos) << why;
+  EXPECT_TRUE(fileBytes(b) == b_before) << "the foreign log was written into the database";
+  EXPECT_TRUE(fileBytes(b + "-wal") == fileBytes(foreign_log)) << "the foreign log was changed";
+  EXPECT_NE(storeRefusal(b, 0.0, TileStore::Access::kReadOnly).find("belongs to another database"), std::string::npos);
+  std::remove((b + "-wal").c_str());
+  {
+    TileStore mission_b(b, kRes);
+    const auto tiles = mission_b.tiles();
+    ASSERT_EQ(tiles.size(), 1u);
+    EXPECT_EQ(tiles[0], MapAccumulator::TileIndex(7, 0, 0));
+  }
+  TileStore recovered(crashed, kRes);  // its own log: replayed
+  EXPECT_EQ(recovered.tiles().size(), 3u);
 }

@@ -71,8 +71,9 @@ class MissionMap {
   std::vector<TileContent> takeChangedTiles(bool whole_map, bool* whole_map_out);
   /// MapAccumulator::clearBox over the whole mission: the store's tiles that
   /// overlap the box come back one at a time, are cleared, and go back to
-  /// the store if they lie outside the window (so memory stays bounded
-  /// whatever the box). Returns how many cells were cleared.
+  /// the store if they lie outside the window, or if there is no window yet
+  /// (so memory stays bounded whatever the box, and a clear that finds
+  /// nothing leaves nothing in RAM). Returns how many cells were cleared.
   size_t clearBox(const Eigen::Vector3d& W_min, const Eigen::Vector3d& W_max);
   /// Empties the map, the store's tiles too.
   void reset();
@@ -113,6 +114,10 @@ class MissionMap {
   std::unordered_set<uint64_t> unmerged_;     ///< live tiles changed since maintain() merged their leaves
   bool all_unpublished_ = true;               ///< the next takeChangedTiles() gives the whole map
   bool freed_memory_ = false;                 ///< maintain() moved tiles or merged leaves since takeFreedMemory()
+  /// The live map's kept box grown by kPruneSlack · max_extent_m; empty before the first update.
+  Eigen::AlignedBox3d window() const;
+  /// Moves the resident tile @p key to the store (written only if changed) and out of RAM.
+  void storeTile(uint64_t key, MaintainResult* result);
   /// Moves the live map's dirty tiles to unsaved_ (with a store), unpublished_ and unmerged_.
   void collectDirtyTiles();
   /// MapAccumulator::mergeEqualLeaves for each tile of unmerged_.

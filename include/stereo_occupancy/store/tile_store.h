@@ -61,7 +61,10 @@ class TileStore {
   /// created or read, another process has it open ("locked"), it is not a
   /// tile database (another program's SQLite file is never changed), its
   /// meta entries are missing or not numbers, its tiles have another
-  /// resolution, or (kReadOnly) a row is damaged.
+  /// resolution, its -wal file belongs to another database (detected for
+  /// databases of this version: each holds a random mission id that every
+  /// commit writes into its log; the files are then left as they are), or
+  /// (kReadOnly) a row is damaged.
   TileStore(const std::string& path, double resolution_m, Access access = Access::kReadWrite);
   /// Writes what is queued (a failure goes to stderr), then closes.
   ~TileStore();
@@ -122,6 +125,14 @@ class TileStore {
   /// Creates the tables in a new database or checks an existing one's meta
   /// entries (the constructor's part inside its first transaction).
   void openTables();
+  /// The mission id (PRAGMA application_id) in @p path's own header, read
+  /// without SQLite; 0 if no -wal file waits beside it or there is none.
+  static uint32_t missionIdInFile(const std::string& path);
+  /// Refuses a -wal file that SQLite replayed onto this database from another
+  /// one: every commit writes page 1, so another mission's log carries its id.
+  void checkWalBelongs(uint32_t file_mission);
+  /// A random positive mission id into the header (PRAGMA application_id).
+  void setMissionId();
   /// Checks every row; moves the damaged ones aside (kReadWrite) or refuses them.
   void checkRows();
   /// Moves the rows of @p damaged (tile, reason) to damaged_tiles; requires db_mutex_ or the constructor.
@@ -134,6 +145,7 @@ class TileStore {
   Access access_;
   mutable std::mutex db_mutex_;  ///< the connection's; taken after mutex_ if both
   sqlite3* db_ = nullptr;
+  uint64_t commits_ = 0;  ///< write() counts them into PRAGMA user_version; requires db_mutex_
 
   mutable std::mutex mutex_;  ///< guards everything below
   std::condition_variable wake_writer_, written_;
