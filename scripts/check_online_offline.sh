@@ -8,6 +8,9 @@ repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 ws="${WS:-$repo/build/ws}"
 out="$repo/build/online_offline"
 export PATH="/usr/bin:$PATH"
+# A roscore of its own, never the default port another program may hold.
+ros_port="${ROS_PORT:-11392}"
+export ROS_MASTER_URI="http://localhost:$ros_port"
 bin="$ws/devel/lib/stereo_occupancy"
 scenario="${SCENARIO:-posts}"
 rm -rf "$out"
@@ -18,7 +21,7 @@ set +u
 # shellcheck disable=SC1091
 source "$ws/devel/setup.bash"
 set -u
-roslaunch stereo_occupancy replay.launch bag:="$out/flight.bag" save_dir:="$out/online" >"$out/replay.log" 2>&1
+roslaunch -p "$ros_port" stereo_occupancy replay.launch bag:="$out/flight.bag" save_dir:="$out/online" >"$out/replay.log" 2>&1
 
 failure=""
 for ext in bt ot; do

@@ -12,6 +12,9 @@ ws="${WS:-$repo/build/ws}"
 bag="${BAG:-$repo/build/demo/posts_seed1.bag}"
 out="${OUT:-$repo/build/demo/rviz_posts.png}"
 export PATH="/usr/bin:$PATH"
+# A roscore of its own, never the default port another program may hold.
+ros_port="${ROS_PORT:-11393}"
+export ROS_MASTER_URI="http://localhost:$ros_port"
 [ -f "$bag" ] || { echo "render_rviz: no bag at $bag (run scripts/run_demo.sh first)"; exit 1; }
 bag="$(realpath "$bag")"  # roslaunch's nodes run in ~/.ros
 mkdir -p "$(dirname "$out")"
@@ -30,7 +33,7 @@ sleep 1
 # subscribed: the map is published while the bag's clock runs. The nodes
 # stay up after the bag for the picture.
 delay_s=10
-DISPLAY="$display" LIBGL_ALWAYS_SOFTWARE=1 roslaunch stereo_occupancy replay.launch bag:="$bag" rviz:=true \
+DISPLAY="$display" LIBGL_ALWAYS_SOFTWARE=1 roslaunch -p "$ros_port" stereo_occupancy replay.launch bag:="$bag" rviz:=true \
   end_with_bag:=false delay_s:=$delay_s >"$log" 2>&1 &
 launch_pid=$!
 duration="$(rosbag info -y -k duration "$bag" | cut -d. -f1)"

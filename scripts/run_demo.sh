@@ -17,6 +17,9 @@ out="${OUT:-$repo/build/demo}"
 scenario="${SCENARIO:-posts}"
 seed="${SEED:-1}"
 export PATH="/usr/bin:$PATH"
+# A roscore of its own, never the default port another program may hold.
+ros_port="${ROS_PORT:-11394}"
+export ROS_MASTER_URI="http://localhost:$ros_port"
 
 "$repo/scripts/install_deps.sh"
 mkdir -p "$out"
@@ -38,7 +41,7 @@ set +u
 source "$ws/devel/setup.bash"
 set -u
 echo "replaying $bag through DisparityMapper and OctomapAccumulator (launch/replay.launch) ..."
-roslaunch stereo_occupancy replay.launch bag:="$bag" save_dir:="$map_dir" config:="${CONFIG:-$repo/config/mapping.yaml}" >"$out/replay_$scenario.log" 2>&1 || {
+roslaunch -p "$ros_port" stereo_occupancy replay.launch bag:="$bag" save_dir:="$map_dir" config:="${CONFIG:-$repo/config/mapping.yaml}" >"$out/replay_$scenario.log" 2>&1 || {
   tail -30 "$out/replay_$scenario.log"
   exit 1
 }
