@@ -6,6 +6,8 @@
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <rosgraph_msgs/Log.h>
 #include <dynamic_reconfigure/Reconfigure.h>
+#include <nodelet/NodeletLoad.h>
+#include <nodelet/NodeletUnload.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 #include <std_srvs/Empty.h>
@@ -23,6 +25,9 @@
 #include <cstring>
 #include <memory>
 #include <mutex>
+#include <string>
+#include <tuple>
+#include <utility>
 #include <vector>
 
 #include "stereo_occupancy/OccupancyUpdate.h"
@@ -77,6 +82,26 @@ class MappingTest : public ::testing::Test {
             }
         });
     EXPECT_TRUE(waitFor([&] { return got; }, 10.0)) << "no diagnostics from the mapper";
+    sub.shutdown();
+    std::lock_guard<std::mutex> lock(mutex_);
+    return values;
+  }
+
+  /// The accumulator's diagnostic values and its summary ("message"), from the next /diagnostics message that has them.
+  std::map<std::string, std::string> accumulatorDiagnostics() {
+    std::map<std::string, std::string> values;
+    bool got = false;
+    ros::Subscriber sub = nh_.subscribe<diagnostic_msgs::DiagnosticArray>(
+        "/diagnostics", 10, [&](const diagnostic_msgs::DiagnosticArrayConstPtr& msg) {
+          std::lock_guard<std::mutex> lock(mutex_);
+          for (const auto& status : msg->status)
+            if (status.name == "octomap_accumulator: accumulator") {
+              for (const auto& kv : status.values) values[kv.key] = kv.value;
+              values["message"] = status.message;
+              got = true;
+            }
+        });
+    EXPECT_TRUE(waitFor([&] { return got; }, 10.0)) << "no diagnostics from the accumulator";
     sub.shutdown();
     std::lock_guard<std::mutex> lock(mutex_);
     return values;
@@ -243,10 +268,55 @@ TEST_F(MappingTest, DepthInputReconfigureAndInvalidParameters) {
     ros::WallDuration(0.05).sleep();
   ASSERT_GT(depth_pub.getNumSubscribers(), 0u);
 
-  // The nodelet with resolution_m = -1 subscribed to nothing.
+  // A mapper loaded with resolution_m = -1 refuses to start: it says so,
+  // naming the parameter, and subscribes to nothing (its onInit returns, so
+  // the load itself answers success); the manager lives on, and the same
+  // nodelet with a valid value starts.
+  std::vector<std::string> fatal;
+  ros::Subscriber log_sub = nh_.subscribe<rosgraph_msgs::Log>(
+      "/rosout", 100, [&](const rosgraph_msgs::LogConstPtr& log) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (log->level == rosgraph_msgs::Log::FATAL) fatal.push_back(log->msg);
+      });
+  const ros::WallTime log_until = ros::WallTime::now() + ros::WallDuration(10.0);
+  while (log_sub.getNumPublishers() < 2 && ros::WallTime::now() < log_until) ros::WallDuration(0.05).sleep();
+  ASSERT_GE(log_sub.getNumPublishers(), 2u) << "the nodelet manager's /rosout is not connected";
+  ros::WallDuration(0.5).sleep();  // the connections' handshakes
   ros::Publisher bad_pub = nh_.advertise<stereo_msgs::DisparityImage>("/bad/disparity", 1);
-  ros::WallDuration(1.0).sleep();
+  nodelet::NodeletLoad load;
+  load.request.name = "/bad_mapper";
+  load.request.type = "stereo_occupancy/DisparityMapper";
+  for (const auto& [from, to] : std::vector<std::pair<std::string, std::string>>{
+           {"disparity", "/bad/disparity"}, {"occupancy_update", "/bad/occupancy_update"},
+           {"local_grid_cloud", "/bad/local_grid_cloud"}, {"disparity_image", "/bad/disparity_image"}}) {
+    load.request.remap_source_args.push_back("/" + from);
+    load.request.remap_target_args.push_back(to);
+  }
+  nodelet::NodeletUnload unload;
+  unload.request.name = "/bad_mapper";
+  nh_.setParam("/bad_mapper/resolution_m", -1.0);
+  ASSERT_TRUE(ros::service::call("/stereo_occupancy_manager/load_nodelet", load));
+  auto refusedToStart = [&] {
+    for (const auto& m : fatal)
+      if (m.find("/bad_mapper: invalid parameter: resolution_m") != std::string::npos &&
+          m.find("does not start") != std::string::npos)
+        return true;
+    return false;
+  };
+  ASSERT_TRUE(waitFor(refusedToStart, 10.0)) << fatal.size() << " FATAL messages, none from /bad_mapper";
+  // The message is onInit's last act: from here on no subscription can come.
+  ros::WallDuration(0.5).sleep();
   EXPECT_EQ(bad_pub.getNumSubscribers(), 0u);
+  EXPECT_FALSE(ros::service::exists("/bad_mapper/set_parameters", false));
+  ASSERT_TRUE(ros::service::call("/stereo_occupancy_manager/unload_nodelet", unload));
+  nh_.setParam("/bad_mapper/resolution_m", 0.25);
+  ASSERT_TRUE(ros::service::call("/stereo_occupancy_manager/load_nodelet", load));
+  ASSERT_TRUE(load.response.success);
+  const ros::WallTime start_until = ros::WallTime::now() + ros::WallDuration(20.0);
+  while (bad_pub.getNumSubscribers() == 0 && ros::WallTime::now() < start_until) ros::WallDuration(0.05).sleep();
+  EXPECT_GT(bad_pub.getNumSubscribers(), 0u) << "the same mapper with resolution_m = 0.25 did not start";
+  EXPECT_TRUE(ros::service::call("/stereo_occupancy_manager/unload_nodelet", unload));
+  nh_.deleteParam("/bad_mapper");
 
   sensor_msgs::CameraInfo info;
   info.header.frame_id = "camera_optical";
@@ -477,21 +547,6 @@ TEST_F(MappingTest, BadInputIsRefusedAndTheNextImageWorks) {
       for (float v : u->log_odds) ASSERT_TRUE(std::isfinite(v));
   }
 
-  // Updates the accumulator must refuse: sizes that do not fit, another resolution, NaN.
-  OccupancyUpdate bad = *updates_.back();
-  bad.log_odds.push_back(1.0f);
-  update_pub.publish(bad);
-  bad = *updates_.back();
-  bad.resolution = 0.5;
-  update_pub.publish(bad);
-  bad = *updates_.back();
-  bad.log_odds[0] = nan;
-  update_pub.publish(bad);
-  bad = *updates_.back();
-  bad.run_start[0] = 4000000000u;
-  update_pub.publish(bad);
-  ros::WallDuration(0.5).sleep();
-
   // An image whose disparities all lie outside the message's range maps
   // nothing: published empty, counted and warned about (checked below).
   const ros::Time narrow_stamp = next();
@@ -525,6 +580,36 @@ TEST_F(MappingTest, BadInputIsRefusedAndTheNextImageWorks) {
     // tf2 itself refuses a NaN pose and a non-unit quaternion, so those two
     // images wait for a pose that never comes (dropped when the queue pushes
     // them out); no update carries their stamps (checked above).
+  }
+
+  // Updates the accumulator must refuse: sizes that do not fit, another
+  // resolution, NaN. Each is counted in its diagnostics, with the reason.
+  // (After the images: waiting for the diagnostics would age their stamps.)
+  OccupancyUpdate good_update;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    good_update = *updates_.back();
+  }
+  std::vector<std::tuple<std::string, std::function<void(OccupancyUpdate&)>, std::string>> bad_updates = {
+      {"one value more than the runs cover", [](OccupancyUpdate& u) { u.log_odds.push_back(1.0f); }, "the runs cover"},
+      {"resolution 0.5 m", [](OccupancyUpdate& u) { u.resolution = 0.5; }, "update resolution 0.5"},
+      {"a NaN value", [=](OccupancyUpdate& u) { u.log_odds[0] = nan; }, "a log-odds value is not finite"},
+      {"a run past the grid", [](OccupancyUpdate& u) { u.run_start[0] = 4000000000u; }, "a run ends outside the grid"},
+  };
+  long refused_before = std::stol(accumulatorDiagnostics()["updates refused"]);
+  for (const auto& [what, spoil, reason] : bad_updates) {
+    OccupancyUpdate bad = good_update;
+    spoil(bad);
+    update_pub.publish(bad);
+    std::map<std::string, std::string> accumulator;
+    const std::string refused = std::to_string(refused_before + 1);
+    const ros::WallTime until = ros::WallTime::now() + ros::WallDuration(10.0);
+    while ((accumulator = accumulatorDiagnostics())["updates refused"] != refused && ros::WallTime::now() < until) {
+    }
+    EXPECT_EQ(accumulator["updates refused"], refused) << what << " was not refused";
+    EXPECT_NE(accumulator["message"].find("refused an update: " + reason), std::string::npos)
+        << what << ": " << accumulator["message"];
+    refused_before = std::stol(accumulator["updates refused"]);  // the next case counts from here
   }
 
   // The manager is alive and the map holds the wall, with nothing non-finite.
