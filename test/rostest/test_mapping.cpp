@@ -417,7 +417,7 @@ TEST_F(MappingTest, DepthInputReconfigureAndInvalidParameters) {
   const ros::Time later = with_hit + ros::Duration(0.1);
   EXPECT_NEAR(drawWith(reconfigure, later), logit(0.5 + 0.05 / (dl * std::sqrt(2 * M_PI))), 0.01);
 
-  // Out of range: the server clamps k_m = 50 to its maximum, 1.
+  // Out of range: the server clamps k_m = 50 to its maximum, 10.
   auto reconfigureDouble = [&](const std::vector<std::pair<std::string, double>>& values) {
     dynamic_reconfigure::Reconfigure srv;
     for (const auto& [name, value] : values) {
@@ -449,17 +449,28 @@ TEST_F(MappingTest, DepthInputReconfigureAndInvalidParameters) {
   for (const auto& p : bad_algorithm.response.config.strs) shown_strs[p.name] = p.value;
   EXPECT_EQ(shown_strs["algorithm"], "line_pyramid_bounded");
   EXPECT_EQ(shown_strs["sensor_profile"], "gaussian");  // as set above
-  // The next image is drawn with k = 1 (the clamped value, capped at p_max by
-  // the model) and the old range: the wall at 12 m is still there.
+  // The next image is drawn with k = 10 (the clamped value) and the old
+  // range (0.5 to 25 m). At 12 m any k above 0.34 m reaches the cap p_max;
+  // a wall at 20 m with delta_d_px = 5 has Δl = 20² · 5 / 210 = 9.5 m, so
+  // with p_max = 0.99 its peak 0.5 + k / (Δl √(2π)) is 0.92 for k = 10 and
+  // 0.54 for k = 1: below the cap, it tells the two apart.
+  std::map<std::string, double> wide = reconfigureDouble({{"delta_d_px", 5.0}, {"p_max", 0.99}});
+  EXPECT_DOUBLE_EQ(wide["k_m"], 10.0);
+  EXPECT_DOUBLE_EQ(wide["p_max"], 0.99);
+  SyntheticScene far_wall;
+  far_wall.addBox(Eigen::Vector3d(20.0, -30.0, -30.0), Eigen::Vector3d(21.0, 30.0, 30.0));
+  const cv::Mat far_image = renderDisparity(far_wall, StereoCameraModel(StereoCameraConfig()), T_W_C_);
   const ros::Time last = later + ros::Duration(0.1);
-  sendFrame(last);
+  sendFrame(last, "camera_optical", true, &far_image);
   ASSERT_TRUE(waitFor([&] { return updates_.back()->header.stamp == last; }, 20.0));
   OccupancyUpdateConstPtr clamped;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     clamped = updates_.back();
   }
-  EXPECT_NEAR(maxLogOdds(*clamped), logit(std::min(0.5 + 1.0 / (dl * std::sqrt(2 * M_PI)), 0.9)), 0.01);
+  const double dl_far = 400.0 * 5.0 / 210.0;
+  EXPECT_NEAR(maxLogOdds(*clamped), logit(0.5 + 10.0 / (dl_far * std::sqrt(2 * M_PI))), 0.01);
+  reconfigureDouble({{"delta_d_px", 0.5}, {"p_max", 0.9}});  // as before, for the cases after this one
 }
 
 // Hostile input: each bad message is refused without an update, the next
