@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # One pipeline online and offline: a short simulated flight mapped by
 # bag_to_map and replayed through the nodelets (launch/replay.launch) must
-# give byte-identical .bt and .ot files. Needs a built workspace; writes a
+# give byte-identical .bt and .ot files that hold the flight's surfaces
+# (evaluate_map: occupied cells and recall). Needs a built workspace; writes a
 # JUnit file to $RESULTS if set. FRAMES (default 60), SCENARIO (default posts).
 set -euo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -30,10 +31,21 @@ for ext in bt ot; do
   fi
 done
 grep -q '"dropped_no_pose": 0, "refused": 0' "$out/bag_to_map.json" || failure="$failure bag_to_map dropped images;"
+# Two empty maps are byte-identical too: each map must hold the flight's
+# surfaces (the posts flight of 60 frames: 25 831 occupied cells, recall 1).
+min_occupied="${MIN_OCCUPIED:-10000}"
+for map in "$out/offline.bt" "$out/online/stereo_occupancy_map.bt"; do
+  score="$("$bin/evaluate_map" --map "$map" --scenario "$scenario" --frames "${FRAMES:-60}" 2>/dev/null || true)"
+  occupied="$(grep -o '"occupied_cells": [0-9]*' <<<"$score" | head -n 1 | grep -o '[0-9]*$' || true)"
+  recall="$(grep -o '"occupied_recall": [0-9.e+-]*' <<<"$score" | head -n 1 | cut -d' ' -f2 || true)"
+  if [ -z "$occupied" ] || [ "$occupied" -lt "$min_occupied" ] || ! awk -v r="$recall" 'BEGIN { exit !(r >= 0.9) }'; then
+    failure="$failure $(basename "$map") holds ${occupied:-no} occupied cells (recall ${recall:-none}; at least $min_occupied and 0.9 wanted);"
+  fi
+done
 if [ -n "$failure" ]; then
-  echo "online and offline maps differ:$failure see $out"
+  echo "online/offline check FAILED:$failure see $out"
 else
-  echo "online and offline maps are byte-identical ($(stat -c %s "$out/offline.bt") + $(stat -c %s "$out/offline.ot") bytes)"
+  echo "online and offline maps are byte-identical ($(stat -c %s "$out/offline.bt") + $(stat -c %s "$out/offline.ot") bytes, $occupied occupied cells, recall $recall)"
 fi
 # shellcheck source=scripts/junit.sh
 source "$repo/scripts/junit.sh"
