@@ -452,8 +452,9 @@ void OctomapAccumulator::openDatabase() {
   } catch (const std::exception& e) {
     // The live map works without it; what leaves max_extent_m is then lost.
     database_problem_ = e.what();
-    NODELET_ERROR("%s; mapping goes on without it: cells beyond max_extent_m are dropped and ~save_map writes "
-                  "only the live map", e.what());
+    NODELET_ERROR("%s; mapping goes on without it: cells beyond max_extent_m are dropped, and ~save_map answers "
+                  "false and writes only the live map, to %s%s.bt and .ot", e.what(), params_.map_name.c_str(),
+                  kLiveOnlySuffix);
     return;
   }
   const size_t tiles = fusion_->mission().store()->tiles().size();
