@@ -7,8 +7,16 @@
 
 #include <boost/make_shared.hpp>
 
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <utility>
+#include <vector>
+
 #include "stereo_occupancy/ros/conversions.h"
 #include "stereo_occupancy/ros/mapping_pipeline.h"
+#include "stereo_occupancy/ros/parameters.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
 
 using namespace stereo_occupancy;
@@ -217,4 +225,97 @@ TEST_F(PipelineTest, TheMapIsPrunedOnTheUpdatesClock) {
   }
   EXPECT_GT(fusion.counters().leaves_pruned, 0u);
   EXPECT_EQ(fusion.map().tree().search(12.1, 0.1, 2.1), nullptr);
+}
+
+namespace {
+
+/// @p value as a parameter's text: whole numbers without a fraction (int parameters take no "1.000000").
+std::string parameterText(double value) {
+  char text[64];
+  if (value == std::floor(value) && std::abs(value) < 1e15)
+    std::snprintf(text, sizeof text, "%.0f", value);
+  else
+    std::snprintf(text, sizeof text, "%.17g", value);
+  return text;
+}
+
+/// Each numeric parameter of @p Params at both ends of its range, the rest at their defaults.
+template <typename Params>
+std::vector<std::pair<std::string, std::string>> rangeEnds() {
+  std::vector<std::pair<std::string, std::string>> ends;
+  Params defaults;
+  Params::forEachParameter(defaults, [&](const ParameterSpec& spec, const auto&) {
+    if (std::isnan(spec.min)) return;  // a text, flag or choice
+    ends.emplace_back(spec.name, parameterText(spec.min));
+    ends.emplace_back(spec.name, parameterText(spec.max));
+  });
+  return ends;
+}
+
+}  // namespace
+
+// Every value a user may set, by the ranges of the one parameter table, maps
+// the wall or is refused with a reason: no exception, no grid beyond
+// max_grid_cells (σ_angle 0.5 rad, the top of its range, once took 43 s and
+// 1 GB an image). Each end's time and cells are printed, not asserted.
+TEST_F(PipelineTest, EveryNumberParameterAtTheEndsOfItsRangeMapsOrRefuses) {
+  size_t mapped = 0, refused = 0, fused = 0;
+  double stamp_s = 100.0;
+  for (const auto& [name, value] : rangeEnds<DisparityMapperParameters>()) {
+    DisparityMapperParameters mapper;
+    OctomapAccumulatorParameters accumulator;
+    std::string why;
+    if (!loadParameters({{name, value}}, &mapper, &accumulator, &why)) {
+      // An end that conflicts with another default (max_range_m at its
+      // lowest against min_range_m...) is refused by name.
+      EXPECT_NE(why.find(name), std::string::npos) << name << "=" << value << ": " << why;
+      ++refused;
+      continue;
+    }
+    FrameMapping mapping(mapper);
+    FrameResult result;
+    stamp_s += 1.0;
+    const auto start = std::chrono::steady_clock::now();
+    OccupancyUpdatePtr update;
+    ASSERT_NO_THROW(update = mapping.map(frame(stamp_s), nullptr, tf_, ros::Time(stamp_s + 0.001), &result))
+        << name << "=" << value;
+    const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    if (update) {
+      ++mapped;
+      const size_t cells = static_cast<size_t>(update->size[0]) * update->size[1] * update->size[2];
+      EXPECT_LE(cells, mapper.drawing.max_grid_cells) << name << "=" << value;
+      std::printf("  %s=%s: mapped, %.1f ms, %zu cells in the box, %zu carried\n", name.c_str(), value.c_str(), ms,
+                  cells, update->log_odds.size());
+    } else {
+      ++refused;
+      EXPECT_FALSE(result.why.empty()) << name << "=" << value << " gave nothing and no reason";
+      std::printf("  %s=%s: refused (%s), %.1f ms\n", name.c_str(), value.c_str(), result.why.c_str(), ms);
+    }
+  }
+  // The accumulator's ends, each fusing the default mapper's update.
+  FrameMapping mapping{DisparityMapperParameters()};
+  FrameResult result;
+  const OccupancyUpdatePtr update = mapping.map(frame(stamp_s + 1.0), nullptr, tf_, ros::Time(stamp_s + 1.001), &result);
+  ASSERT_TRUE(update) << result.why;
+  for (const auto& [name, value] : rangeEnds<OctomapAccumulatorParameters>()) {
+    DisparityMapperParameters mapper;
+    OctomapAccumulatorParameters accumulator;
+    std::string why;
+    if (!loadParameters({{name, value}}, &mapper, &accumulator, &why)) {
+      EXPECT_NE(why.find(name), std::string::npos) << name << "=" << value << ": " << why;
+      continue;
+    }
+    MapFusion fusion(accumulator);
+    bool took = false;
+    ASSERT_NO_THROW(took = fusion.fuse(*update, &why)) << name << "=" << value;
+    if (took) {
+      ++fused;
+    } else {
+      EXPECT_FALSE(why.empty()) << name << "=" << value;
+      std::printf("  accumulator %s=%s: refused the update (%s)\n", name.c_str(), value.c_str(), why.c_str());
+    }
+  }
+  std::printf("range ends: %zu mapped, %zu refused; accumulator: %zu fused\n", mapped, refused, fused);
+  EXPECT_GT(mapped, refused);  // most ends map: the ranges are what a user may set
+  EXPECT_GT(fused, 0u);
 }

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <limits>
 #include <map>
@@ -279,4 +280,54 @@ TEST(ParameterTable, MappingYamlSaysTheTable) {
 TEST(ParameterTable, TheReadmeTablesSayTheTable) {
   expectReadmeSaysTheTable<DisparityMapperParameters>("DisparityMapper");
   expectReadmeSaysTheTable<OctomapAccumulatorParameters>("OctomapAccumulator");
+}
+
+namespace {
+
+/// What `roslaunch --dump-params` gives for mapping.launch with @p args: name -> value text.
+std::map<std::string, std::string> launchParams(const std::string& args) {
+  std::map<std::string, std::string> params;
+  const std::string command = "roslaunch --dump-params stereo_occupancy mapping.launch " + args + " 2>&1";
+  FILE* pipe = popen(command.c_str(), "r");
+  if (!pipe) return params;
+  char line[4096];
+  while (fgets(line, sizeof line, pipe)) {
+    const std::string text(line);
+    const size_t colon = text.find(": ");
+    if (text.rfind('/', 0) != 0 || colon == std::string::npos) continue;
+    std::string value = text.substr(colon + 2);
+    while (!value.empty() && (value.back() == '\n' || value.back() == '\r')) value.pop_back();
+    params[text.substr(0, colon)] = value;
+  }
+  pclose(pipe);
+  return params;
+}
+
+}  // namespace
+
+// mapping.launch's world_frame, save_dir and map_file args overwrote the
+// same entries of the user's YAML with their defaults, silently: not given,
+// they leave the config's values; given, they win.
+TEST(LaunchFile, ArgsNotGivenLeaveTheConfigsValues) {
+  std::string yaml = readFile(std::string(SOURCE_DIR) + "/config/mapping.yaml");
+  for (const auto& [from, to] : {std::make_pair(std::string("world_frame: map "), std::string("world_frame: odom ")),
+                                 std::make_pair(std::string("save_dir: \"\""), std::string("save_dir: /tmp/my_maps")),
+                                 std::make_pair(std::string("map_file: \"\""), std::string("map_file: /tmp/my_map.ot"))}) {
+    size_t at = 0, replaced = 0;
+    while ((at = yaml.find(from, at)) != std::string::npos) yaml.replace(at, from.size(), to), ++replaced;
+    ASSERT_GT(replaced, 0u) << "config/mapping.yaml has no '" << from << "'";
+  }
+  const std::string config = ::testing::TempDir() + "/my_mapping.yaml";
+  std::ofstream(config) << yaml;
+  const auto own = launchParams("config:=" + config);
+  ASSERT_FALSE(own.empty()) << "roslaunch --dump-params gave nothing (is the workspace sourced?)";
+  EXPECT_EQ(own.at("/disparity_mapper/world_frame"), "odom");
+  EXPECT_EQ(own.at("/octomap_accumulator/world_frame"), "odom");
+  EXPECT_EQ(own.at("/octomap_accumulator/save_dir"), "/tmp/my_maps");
+  EXPECT_EQ(own.at("/octomap_accumulator/map_file"), "/tmp/my_map.ot");
+  const auto given = launchParams("config:=" + config + " world_frame:=map save_dir:=/tmp/other");
+  EXPECT_EQ(given.at("/disparity_mapper/world_frame"), "map");
+  EXPECT_EQ(given.at("/octomap_accumulator/world_frame"), "map");
+  EXPECT_EQ(given.at("/octomap_accumulator/save_dir"), "/tmp/other");
+  EXPECT_EQ(given.at("/octomap_accumulator/map_file"), "/tmp/my_map.ot");
 }
