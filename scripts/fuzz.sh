@@ -41,8 +41,8 @@ for t in "${targets[@]}"; do
     -loctomap -loctomath -o "$out/$t"
 done
 
-# The drawer from the seeds in test/fuzz/corpus for SECONDS; the accumulator's
-# input (occupancy updates from any node) from nothing for half as long.
+# The drawer from the seeds in test/fuzz/corpus for SECONDS, the other
+# targets from nothing for half as long (run_from_nothing below).
 # -malloc_limit_mb: one allocation of more than 2 GB is a failure, so an
 # update that claims a huge box and makes the code allocate for it is found.
 run() {  # NAME SECONDS CORPUS
@@ -52,20 +52,21 @@ run() {  # NAME SECONDS CORPUS
 status=0
 run fuzz_disparity_drawer "$seconds" "$corpus" || status=$?
 tail -n 12 "$out/fuzz_disparity_drawer.log"
-update_corpus="update-$corpus"
-[ "${FUZZ_EXPLORE:-0}" = 1 ] || rm -rf "$out/$update_corpus"
-mkdir -p "$out/$update_corpus"
+# The accumulator's input (occupancy updates from any node), then map files
+# and tile rows (the bytes OctoMap's readers would take), each from nothing
+# for half as long.
+run_from_nothing() {  # TARGET CORPUS; prints the target's last lines, returns its status
+  [ "${FUZZ_EXPLORE:-0}" = 1 ] || rm -rf "${out:?}/$2"
+  mkdir -p "$out/$2"
+  local target_status=0
+  run "$1" "$(( (seconds + 1) / 2 ))" "$2" || target_status=$?
+  tail -n 12 "$out/$1.log"
+  return $target_status
+}
 update_status=0
-run fuzz_occupancy_update "$(( (seconds + 1) / 2 ))" "$update_corpus" || update_status=$?
-tail -n 12 "$out/fuzz_occupancy_update.log"
-# Map files and tile rows (the bytes OctoMap's readers would take) from
-# nothing, as long as the updates.
-tree_corpus="tree-$corpus"
-[ "${FUZZ_EXPLORE:-0}" = 1 ] || rm -rf "$out/$tree_corpus"
-mkdir -p "$out/$tree_corpus"
+run_from_nothing fuzz_occupancy_update "update-$corpus" || update_status=$?
 tree_status=0
-run fuzz_octree_data "$(( (seconds + 1) / 2 ))" "$tree_corpus" || tree_status=$?
-tail -n 12 "$out/fuzz_octree_data.log"
+run_from_nothing fuzz_octree_data "tree-$corpus" || tree_status=$?
 if [ -n "${RESULTS:-}" ]; then
   mkdir -p "$RESULTS"
   testcase() {  # TARGET SECONDS STATUS

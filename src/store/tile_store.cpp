@@ -203,8 +203,8 @@ void TileStore::openTables() {
   }
   const auto has = [&](const char* table) { return std::find(tables.begin(), tables.end(), table) != tables.end(); };
   if (tables.empty()) {
-    if (resolution_m_ <= 0.0) throw std::runtime_error("not a tile database (empty)");
-    if (access_ == Access::kReadOnly) throw std::runtime_error("not a tile database (empty)");
+    // Created only by a writer that knows its cells.
+    if (resolution_m_ <= 0.0 || access_ == Access::kReadOnly) throw std::runtime_error("not a tile database (empty)");
     setMissionId();
     execute("CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL)");
     execute("CREATE TABLE tiles (x INTEGER NOT NULL, y INTEGER NOT NULL, z INTEGER NOT NULL, "

@@ -68,44 +68,29 @@ class MappingTest : public ::testing::Test {
     ASSERT_TRUE(ros::service::call("/octomap_accumulator/reset", reset));
   }
 
-  /// The mapper's diagnostic values, from the next /diagnostics message that has them.
-  std::map<std::string, std::string> mapperDiagnostics() {
+  /// The diagnostic values of the status @p name ("disparity_mapper: mapper",
+  /// "octomap_accumulator: accumulator") and its summary ("message"), from
+  /// the next /diagnostics message that has them.
+  std::map<std::string, std::string> diagnostics(const std::string& name) {
     std::map<std::string, std::string> values;
     bool got = false;
     ros::Subscriber sub = nh_.subscribe<diagnostic_msgs::DiagnosticArray>(
         "/diagnostics", 10, [&](const diagnostic_msgs::DiagnosticArrayConstPtr& msg) {
           std::lock_guard<std::mutex> lock(mutex_);
           for (const auto& status : msg->status)
-            if (status.name == "disparity_mapper: mapper") {
-              for (const auto& kv : status.values) values[kv.key] = kv.value;
-              got = true;
-            }
-        });
-    EXPECT_TRUE(waitFor([&] { return got; }, 10.0)) << "no diagnostics from the mapper";
-    sub.shutdown();
-    std::lock_guard<std::mutex> lock(mutex_);
-    return values;
-  }
-
-  /// The accumulator's diagnostic values and its summary ("message"), from the next /diagnostics message that has them.
-  std::map<std::string, std::string> accumulatorDiagnostics() {
-    std::map<std::string, std::string> values;
-    bool got = false;
-    ros::Subscriber sub = nh_.subscribe<diagnostic_msgs::DiagnosticArray>(
-        "/diagnostics", 10, [&](const diagnostic_msgs::DiagnosticArrayConstPtr& msg) {
-          std::lock_guard<std::mutex> lock(mutex_);
-          for (const auto& status : msg->status)
-            if (status.name == "octomap_accumulator: accumulator") {
+            if (status.name == name) {
               for (const auto& kv : status.values) values[kv.key] = kv.value;
               values["message"] = status.message;
               got = true;
             }
         });
-    EXPECT_TRUE(waitFor([&] { return got; }, 10.0)) << "no diagnostics from the accumulator";
+    EXPECT_TRUE(waitFor([&] { return got; }, 10.0)) << "no diagnostics of " << name;
     sub.shutdown();
     std::lock_guard<std::mutex> lock(mutex_);
     return values;
   }
+  std::map<std::string, std::string> mapperDiagnostics() { return diagnostics("disparity_mapper: mapper"); }
+  std::map<std::string, std::string> accumulatorDiagnostics() { return diagnostics("octomap_accumulator: accumulator"); }
 
   void onUpdate(const OccupancyUpdateConstPtr& msg) {
     std::lock_guard<std::mutex> lock(mutex_);
