@@ -146,54 +146,70 @@ TEST(ToolErrors, BagToMapOnACutBagSaysReindexAndLogsOneProgressLine) {
     std::remove(f.c_str());
 }
 
+namespace {
+
+/// The Table I scene's disparity image at a fixed pose, as a bag's frames k
+/// stamped t0 + 0.1 s · k.
+struct Table1Frames {
+  so::StereoCameraModel camera{so::StereoCameraConfig()};
+  Eigen::Isometry3d T_W_C;
+  cv::Mat image = so::table1Image(camera, &T_W_C);
+  ros::Time t0{1000.0};
+
+  ros::Time stamp(int k) const { return t0 + ros::Duration(0.1 * k); }
+  /// The pose at the stamps of the first @p frames frames, for /tf.
+  tf2_msgs::TFMessage poses(int frames) const {
+    tf2_msgs::TFMessage tf;
+    for (int k = 0; k < frames; ++k) tf.transforms.push_back(so::toTransformMsg(T_W_C, stamp(k), "map", "camera_optical"));
+    return tf;
+  }
+  /// Frame @p k's disparity image.
+  stereo_msgs::DisparityImage disparity(int k) const {
+    std_msgs::Header header;
+    header.stamp = stamp(k);
+    header.frame_id = "camera_optical";
+    stereo_msgs::DisparityImage m;
+    so::toDisparityImageMsg(image, header, camera.config(), 128.0, 1.0 / 16.0, &m);
+    return m;
+  }
+};
+
+}  // namespace
+
 // A bag whose good images share the stream with hostile ones: the hostile ones
 // are refused one by one, the good ones mapped.
 TEST(ToolErrors, BagToMapSkipsHostileImages) {
   const std::string bag_path = kTmp + "hostile.bag";
-  const so::StereoCameraModel camera{so::StereoCameraConfig()};
-  Eigen::Isometry3d T_W_C;
-  const cv::Mat image = so::table1Image(camera, &T_W_C);
+  const Table1Frames frames;
   {
     rosbag::Bag bag(bag_path, rosbag::bagmode::Write);
-    const ros::Time t0(1000.0);
-    tf2_msgs::TFMessage tf;
-    for (int k = 0; k < 12; ++k)
-      tf.transforms.push_back(so::toTransformMsg(T_W_C, t0 + ros::Duration(0.1 * k), "map", "camera_optical"));
-    bag.write("/tf", t0, tf);
-    auto good = [&](int k) {
-      std_msgs::Header header;
-      header.stamp = t0 + ros::Duration(0.1 * k);
-      header.frame_id = "camera_optical";
-      stereo_msgs::DisparityImage m;
-      so::toDisparityImageMsg(image, header, camera.config(), 128.0, 1.0 / 16.0, &m);
-      return m;
-    };
+    bag.write("/tf", frames.t0, frames.poses(12));
     std::vector<stereo_msgs::DisparityImage> msgs;
-    msgs.push_back(good(0));
-    stereo_msgs::DisparityImage m = good(1);
+    msgs.push_back(frames.disparity(0));
+    stereo_msgs::DisparityImage m = frames.disparity(1);
     m.image.encoding = "mono8";  // wrong encoding
     msgs.push_back(m);
-    m = good(2);
+    m = frames.disparity(2);
     m.image.data.resize(100);  // data shorter than step * height
     msgs.push_back(m);
-    m = good(3);
+    m = frames.disparity(3);
     m.image.step = 4;  // step shorter than a row
     msgs.push_back(m);
-    m = good(4);
+    m = frames.disparity(4);
     m.image.width = m.image.height = 0;  // empty
     m.image.data.clear();
     msgs.push_back(m);
-    m = good(5);
+    m = frames.disparity(5);
     m.f = std::numeric_limits<float>::quiet_NaN();
     msgs.push_back(m);
-    m = good(6);
+    m = frames.disparity(6);
     m.T = -0.3f;
     msgs.push_back(m);
-    m = good(7);
+    m = frames.disparity(7);
     m.image.height = 240;  // another size than the camera_info-less default: fine, a smaller image
     m.image.data.resize(m.image.step * 240);
     msgs.push_back(m);
-    msgs.push_back(good(8));
+    msgs.push_back(frames.disparity(8));
     for (const auto& msg : msgs) bag.write("/stereo/disparity", msg.header.stamp, msg);
   }
   const Result r = run(std::string(BAG_TO_MAP_EXE) + " --bag " + bag_path + " --output " + kTmp + "hostile_map");
@@ -225,20 +241,10 @@ namespace {
 
 /// A bag at @p path with one disparity image of the Table I scene and its pose.
 void writeOneImageBag(const std::string& path) {
-  const so::StereoCameraModel camera{so::StereoCameraConfig()};
-  Eigen::Isometry3d T_W_C;
-  const cv::Mat image = so::table1Image(camera, &T_W_C);
+  const Table1Frames frames;
   rosbag::Bag bag(path, rosbag::bagmode::Write);
-  const ros::Time t0(1000.0);
-  tf2_msgs::TFMessage tf;
-  tf.transforms.push_back(so::toTransformMsg(T_W_C, t0, "map", "camera_optical"));
-  bag.write("/tf", t0, tf);
-  std_msgs::Header header;
-  header.stamp = t0;
-  header.frame_id = "camera_optical";
-  stereo_msgs::DisparityImage m;
-  so::toDisparityImageMsg(image, header, camera.config(), 128.0, 1.0 / 16.0, &m);
-  bag.write("/stereo/disparity", t0, m);
+  bag.write("/tf", frames.t0, frames.poses(1));
+  bag.write("/stereo/disparity", frames.t0, frames.disparity(0));
 }
 
 }  // namespace
