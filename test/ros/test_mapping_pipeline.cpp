@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <set>
 #include <string>
 #include <utility>
 #include <vector>
@@ -252,24 +253,45 @@ std::vector<std::pair<std::string, std::string>> rangeEnds() {
   return ends;
 }
 
+/// Both nodelets' parameters with @p name at @p value, the rest at their
+/// defaults; false (and the reason checked to name it) for an end that
+/// conflicts with another default, such as max_range_m at its lowest against min_range_m.
+bool loadEnd(const std::string& name, const std::string& value, DisparityMapperParameters* mapper,
+             OctomapAccumulatorParameters* accumulator) {
+  std::string why;
+  if (loadParameters({{name, value}}, mapper, accumulator, &why)) return true;
+  EXPECT_NE(why.find(name), std::string::npos) << name << "=" << value << ": " << why;
+  std::printf("  %s=%s: refused by the table (%s)\n", name.c_str(), value.c_str(), why.c_str());
+  return false;
+}
+
 }  // namespace
 
 // Every value a user may set, by the ranges of the one parameter table, maps
-// the wall or is refused with a reason: no exception, no grid beyond
-// max_grid_cells (σ_angle 0.5 rad, the top of its range, once took 43 s and
-// 1 GB an image). Each end's time and cells are printed, not asserted.
+// the wall or is refused with a reason: no exception, no box beyond
+// max_grid_cells nor 8 times the defaults' (σ_angle 0.5 rad, the top of its
+// range, once took 43 s and 1 GB an image). Each end's time is printed, not asserted.
 TEST_F(PipelineTest, EveryNumberParameterAtTheEndsOfItsRangeMapsOrRefuses) {
   size_t mapped = 0, refused = 0, fused = 0;
+  std::set<std::string> not_mapped, not_fused;
   double stamp_s = 100.0;
+  // Memory: no end may grow the frame's box past this many times the
+  // defaults' (the σ tops, padded by the capped blur, grow it 4.1-fold;
+  // uncapped, σ_angle 0.5 rad grew it 97-fold and took 55 s).
+  constexpr size_t kMaxBoxGrowth = 8;
+  FrameMapping defaults{DisparityMapperParameters()};
+  FrameResult default_result;
+  const OccupancyUpdatePtr default_update =
+      defaults.map(frame(stamp_s), nullptr, tf_, ros::Time(stamp_s + 0.001), &default_result);
+  ASSERT_TRUE(default_update) << default_result.why;
+  const size_t default_cells =
+      static_cast<size_t>(default_update->size[0]) * default_update->size[1] * default_update->size[2];
   for (const auto& [name, value] : rangeEnds<DisparityMapperParameters>()) {
     DisparityMapperParameters mapper;
     OctomapAccumulatorParameters accumulator;
-    std::string why;
-    if (!loadParameters({{name, value}}, &mapper, &accumulator, &why)) {
-      // An end that conflicts with another default (max_range_m at its
-      // lowest against min_range_m...) is refused by name.
-      EXPECT_NE(why.find(name), std::string::npos) << name << "=" << value << ": " << why;
+    if (!loadEnd(name, value, &mapper, &accumulator)) {
       ++refused;
+      not_mapped.insert(name);
       continue;
     }
     FrameMapping mapping(mapper);
@@ -284,10 +306,12 @@ TEST_F(PipelineTest, EveryNumberParameterAtTheEndsOfItsRangeMapsOrRefuses) {
       ++mapped;
       const size_t cells = static_cast<size_t>(update->size[0]) * update->size[1] * update->size[2];
       EXPECT_LE(cells, mapper.drawing.max_grid_cells) << name << "=" << value;
+      EXPECT_LE(cells, kMaxBoxGrowth * default_cells) << name << "=" << value;
       std::printf("  %s=%s: mapped, %.1f ms, %zu cells in the box, %zu carried\n", name.c_str(), value.c_str(), ms,
                   cells, update->log_odds.size());
     } else {
       ++refused;
+      not_mapped.insert(name);
       EXPECT_FALSE(result.why.empty()) << name << "=" << value << " gave nothing and no reason";
       std::printf("  %s=%s: refused (%s), %.1f ms\n", name.c_str(), value.c_str(), result.why.c_str(), ms);
     }
@@ -300,22 +324,32 @@ TEST_F(PipelineTest, EveryNumberParameterAtTheEndsOfItsRangeMapsOrRefuses) {
   for (const auto& [name, value] : rangeEnds<OctomapAccumulatorParameters>()) {
     DisparityMapperParameters mapper;
     OctomapAccumulatorParameters accumulator;
-    std::string why;
-    if (!loadParameters({{name, value}}, &mapper, &accumulator, &why)) {
-      EXPECT_NE(why.find(name), std::string::npos) << name << "=" << value << ": " << why;
+    if (!loadEnd(name, value, &mapper, &accumulator)) {
+      not_fused.insert(name);
       continue;
     }
     MapFusion fusion(accumulator);
+    std::string why;
     bool took = false;
     ASSERT_NO_THROW(took = fusion.fuse(*update, &why)) << name << "=" << value;
     if (took) {
       ++fused;
     } else {
+      not_fused.insert(name);
       EXPECT_FALSE(why.empty()) << name << "=" << value;
       std::printf("  accumulator %s=%s: refused the update (%s)\n", name.c_str(), value.c_str(), why.c_str());
     }
   }
   std::printf("range ends: %zu mapped, %zu refused; accumulator: %zu fused\n", mapped, refused, fused);
-  EXPECT_GT(mapped, refused);  // most ends map: the ranges are what a user may set
-  EXPECT_GT(fused, 0u);
+  // Every other end maps: the σ tops among them (uncapped, their padded
+  // grid went past max_grid_cells), and each of these is refused at one end
+  // only, for the reason printed above (a grid past max_grid_cells, p_sky
+  // below p_free, a principal point far outside the image, an image of more
+  // pixels than allowed; an update of another resolution or box, a
+  // threshold outside the clamping bounds, an empty band).
+  EXPECT_EQ(not_mapped, (std::set<std::string>{"max_range_m", "resolution_m", "p_free", "p_sky", "cx_px", "cy_px",
+                                               "max_image_pixels"}));
+  EXPECT_EQ(refused, not_mapped.size());
+  EXPECT_EQ(not_fused, (std::set<std::string>{"resolution_m", "max_update_cells", "occupancy_threshold_prob",
+                                              "projection_min_z_m", "projection_max_z_m"}));
 }
