@@ -61,8 +61,8 @@ struct DrawingConfig {
   /// cells and values (tested); lower ones for tests and benchmarks.
   SimdLevel simd = availableSimdLevel();
   /// The bounded line drawing's spans (LineDrawer::setSurfaceSpans()): one
-  /// free line and its hits for a block of oblique surface, instead of a
-  /// line per sub-block. Off: for tests and benchmarks.
+  /// free line for a block of oblique surface instead of a line per
+  /// sub-block (its pixels' hits as always). Off: for tests and benchmarks.
   bool surface_spans = true;
   /// Threads that work on one image: the grid's reset, the pyramids, the
   /// line algorithms' lines and sky guard, and the blur; 0: the machine's

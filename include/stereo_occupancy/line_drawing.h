@@ -105,10 +105,13 @@ class LineDrawer {
   /// other up to its farthest measurement (eq. 13) and whose depths leave no
   /// hole wider than one measurement's gap (oblique ground: a span) is not
   /// descended: one line along its centre ray draws the free space up to its
-  /// nearest measurement's gap, and each of the lines the descent would draw
-  /// gives only its hit, in the same cell. The occupied cells are the
-  /// descent's; the free space beyond the nearest gap, within one cell of
-  /// the surface, is left out (docs/performance.md, sixth step).
+  /// nearest measurement's gap; the free space beyond it, within one cell of
+  /// the surface, is left out (docs/performance.md, sixth step). The lines
+  /// draw no hits: every pixel that measures a range gives its own, in the
+  /// cell drawImage() gives it (drawPixelHits()), so the occupied cells are
+  /// per-pixel line drawing's exactly. (One hit per block, at its farthest
+  /// disparity, lost the nearer surface where a real matcher's disparities
+  /// in a block spread over more than a cell of depth.)
   void drawPyramidBounded(const DisparityPyramid& min_pyramid, const DisparityPyramid& max_pyramid,
                           const DisparityBlockBound& bound, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
                           DrawStatistics* stats);
@@ -169,11 +172,22 @@ class LineDrawer {
     /// (a part for the workers) instead of descending into it.
     std::vector<PartStart>* parts = nullptr;
     int split_level = 0;
+    /// The surface profile's hits come from drawPixelHits(), every pixel's
+    /// (the bounded descent): the blocks' lines and spans draw none.
+    bool pixel_hits = false;
   };
   Descent descent(const DisparityPyramid& min_pyramid, const DisparityPyramid* max_pyramid,
                   const DisparityBlockBound* bound, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
                   DrawStatistics* stats);
 
+  /// The surface profile's point hit of every pixel of rows [y_begin,
+  /// y_end) of @p disparity that measures a range, each where drawImage()'s
+  /// pixel line put it before: in the cell of T_W_C·(z·C_ray) (eqs. 1, 2).
+  /// Returns the cells written; adds the pixels to @p stats (if not null).
+  uint64_t drawPixelHits(const RayGrid& g, const cv::Mat& disparity, int y_begin, int y_end,
+                         const Eigen::Matrix3d& R_W_C, DrawStatistics* stats) const;
+  /// Bands of image rows per worker that drawPixelHits() is split into.
+  static constexpr int kHitBandsPerWorker = 4;
   /// pixelProfile() with the ray's norm at hand (|p_c| / z_c, eq. 2) and the free profile built once.
   RangeProfile profileOf(const Descent& s, double ray_norm, float d_px) const;
   /// Draws the line of pixel (x, y) at pyramid level i with disparity d, from depth z_begin on.
@@ -202,7 +216,6 @@ class LineDrawer {
     static constexpr int kMaxLeaves = 64;  ///< more: the block is descended
     int count = 0;
     float lo[kMaxLeaves], hi[kMaxLeaves];  ///< a leaf's min and max disparity [px]
-    int level[kMaxLeaves], x[kMaxLeaves], y[kMaxLeaves];
   };
   /// Adds the leaves below a block; false if one is sky (its free line to the
   /// range is needed) or there are more than kMaxLeaves.
@@ -211,9 +224,8 @@ class LineDrawer {
   /// wider than one measurement's gap (oblique ground, not a post before a wall).
   bool isSpan(const Descent& s, int level, int x, int y, SpanLeaves* leaves) const;
   /// A span: free space along its centre ray up to the nearest measurement's
-  /// gap, and each leaf's hit where the leaf's line would draw it.
-  void drawSpan(const Descent& s, int level, int x, int y, float d_max, const SpanLeaves& leaves,
-                double z_begin) const;
+  /// gap (its pixels' hits are drawPixelHits()').
+  void drawSpan(const Descent& s, int level, int x, int y, float d_max, double z_begin) const;
 
   const StereoCameraModel& camera_;
   const LogOddsTable& table_;

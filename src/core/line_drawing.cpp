@@ -300,19 +300,162 @@ STEREO_OCCUPANCY_INLINE uint64_t drawPointHit(const Grid& g, const Eigen::Vector
   return drawHitAt(g, g.W_origin + W_dir * l_p, profile.hit_log_odds);
 }
 
+/// Component i of T_W_C·p = R_W_C·p + W_origin, summed in Eigen's order
+/// (the same bits as Eigen's product; floating-point contraction is off):
+/// drawHitAtDepth() and the pixel hits' keys of one axis share it.
+STEREO_OCCUPANCY_INLINE double pointComponent(const Eigen::Matrix3d& R_W_C, const Eigen::Vector3d& C_point,
+                                              const Eigen::Vector3d& W_origin, int i) {
+  return ((R_W_C(i, 0) * C_point[0] + R_W_C(i, 1) * C_point[1]) + R_W_C(i, 2) * C_point[2]) + W_origin[i];
+}
+
 /// drawPointHit() for a ray known by its pixel: the measured point
 /// W_p = T_W_C·(z·C_ray) (eqs. 1, 2; C_ray has z = 1), if z_begin <= z and
-/// |p_C| <= the maximum range. No square root or division: a span draws
-/// one hit per leaf. The lines of pixels and blocks put their hits here
-/// too, so a span's leaf and the descent's line of it share the cell.
-/// Returns the cells written (0 or 1).
+/// |p_C| <= the maximum range. No square root or division. The lines of
+/// pixels and blocks put their hits here, and PixelHitRows keys each
+/// pixel's as it does. Returns the cells written (0 or 1).
 template <class Grid>
 STEREO_OCCUPANCY_INLINE uint64_t drawHitAtDepth(const Grid& g, const Eigen::Matrix3d& R_W_C,
                                                 const Eigen::Vector3d& C_ray, double z_m, double z_begin_m,
                                                 float hit_log_odds) {
   if (!(z_m >= z_begin_m) || z_m * z_m * C_ray.squaredNorm() > g.max_range_m * g.max_range_m) return 0;
-  return drawHitAt(g, R_W_C * (C_ray * z_m) + g.W_origin, hit_log_odds);
+  const Eigen::Vector3d C_point = C_ray * z_m;
+  return drawHitAt(
+      g,
+      Eigen::Vector3d(pointComponent(R_W_C, C_point, g.W_origin, 0), pointComponent(R_W_C, C_point, g.W_origin, 1),
+                      pointComponent(R_W_C, C_point, g.W_origin, 2)),
+      hit_log_odds);
 }
+
+/// Every pixel's point hit of whole image rows, keyed as drawHitAtDepth()
+/// keys it, but in float, a chunk of pixels at a time in a loop the
+/// compiler vectorises (per pixel through drawHitAtDepth(), the hits alone
+/// cost twice the bounded descent). A pixel whose point lies within
+/// margin_cells of a cell face across an axis gets that axis's cell again
+/// in double as drawHitAt() computes it (pointComponent()), and one within
+/// a relative margin of the maximum range gets drawHitAtDepth() itself: the
+/// cells are drawHitAtDepth()'s exactly. (A plane on a cell face, as in the
+/// synthetic scenes, puts all its pixels on the double path.)
+class PixelHitRows {
+ public:
+  /// Pixels keyed per chunk.
+  static constexpr int kChunk = 64;
+  /// The float keys' error stays below 2^-20 of the largest magnitude they
+  /// handle [cells]; the margin is 8 times that, at least 2^-8 of a cell.
+  static constexpr float kMinMarginCells = 1.0f / 256.0f;
+  static constexpr double kRelativeMargin = 1.0 / (1 << 17);
+  /// Beyond this margin the float keys are not worth it: all in double.
+  static constexpr float kMaxMarginCells = 0.125f;
+
+  /// What keyChunk() found for one pixel's range.
+  enum Range : int32_t {
+    kNoHit = 0,    ///< not measured, or beyond the maximum range
+    kInRange = 1,  ///< within it
+    kNearMax = 2,  ///< too near the maximum range to tell in float: drawHitAtDepth()
+  };
+
+  /// The keys of up to kChunk pixels.
+  struct Keys {
+    int32_t range[kChunk];    ///< Range
+    int32_t unsure[kChunk];   ///< bit i: near a cell face across axis i (cell[i] is only a guess)
+    int32_t cell[3][kChunk];  ///< the cell along each axis from the grid's first (floor(q) where sure)
+  };
+
+  template <class Grid>
+  PixelHitRows(const Grid& g, const StereoCameraModel& camera, const Eigen::Matrix3d& R_W_C) {
+    const StereoCameraConfig& cfg = camera.config();
+    const double inv_f = 1.0 / cfg.focal_length_px;
+    const Eigen::Vector3d per_x = R_W_C.col(0) * (inv_f * g.inv_c);
+    const Eigen::Vector3d per_y = R_W_C.col(1) * (inv_f * g.inv_c);
+    const Eigen::Vector3d at_00 = R_W_C * Eigen::Vector3d(-cfg.cx_px * inv_f, -cfg.cy_px * inv_f, 1.0) * g.inv_c;
+    // Depths beyond twice the range are beyond it: capped, for bounded keys.
+    const double z_cap = 2.0 * g.max_range_m;
+    // 1 + |cx|/f + w/f + |cy|/f + h/f bounds every ray's terms.
+    const double span = 1.0 + (std::abs(cfg.cx_px) + cfg.width_px + std::abs(cfg.cy_px) + cfg.height_px) * inv_f;
+    double largest = 0.0;
+    for (int i = 0; i < 3; ++i) {
+      per_x_[i] = static_cast<float>(per_x[i]);
+      per_y_[i] = static_cast<float>(per_y[i]);
+      at_00_[i] = static_cast<float>(at_00[i]);
+      origin_[i] = static_cast<float>(g.g0[i]);  // relative to the grid: small numbers
+      largest = std::max(largest, std::abs(g.g0[i]) + z_cap * g.inv_c * span);
+    }
+    margin_cells_ = std::max(kMinMarginCells, static_cast<float>(largest * kRelativeMargin));
+    in_float_ = margin_cells_ <= kMaxMarginCells && largest < double{1 << 30};
+    z_cap_ = static_cast<float>(z_cap);
+    cx_ = static_cast<float>(cfg.cx_px);
+    cy_ = static_cast<float>(cfg.cy_px);
+    inv_f_ = static_cast<float>(inv_f);
+    bf_ = static_cast<float>(camera.bf());
+    const double max_r2 = g.max_range_m * g.max_range_m;
+    r2_in_ = static_cast<float>(max_r2 * (1.0 - kRelativeMargin));
+    r2_out_ = static_cast<float>(max_r2 * (1.0 + kRelativeMargin));
+    // isValidDisparity() and measuresRange() (d > 1e-3·far in double: the
+    // smallest float above that bound) as one interval.
+    const StereoCameraModel::DisparityValidity valid = camera.validity();
+    const double measured_above = 1e-3 * camera.farDisparity();
+    float min_measured = static_cast<float>(measured_above);
+    if (!(static_cast<double>(min_measured) > measured_above))
+      min_measured = std::nextafter(min_measured, std::numeric_limits<float>::infinity());
+    min_d_ = std::max(valid.min_px, min_measured);
+    max_d_ = valid.max_px;
+  }
+
+  /// False: each pixel keyed in double (a huge grid or range).
+  bool keysInFloat() const { return in_float_; }
+
+  /// True if d is a valid disparity that measures a range (isValidDisparity(), measuresRange()).
+  bool measured(float d) const { return (d >= min_d_) & (d <= max_d_); }
+
+  /// True if one of pixels [x, x + n) of the row is measured().
+  bool anyMeasured(const float* row, int x, int n) const {
+    const float min_d = min_d_, max_d = max_d_;
+    int any = 0;
+    for (int k = 0; k < n; ++k) any |= (row[x + k] >= min_d) & (row[x + k] <= max_d);
+    return any != 0;
+  }
+
+  /// Keys pixels [x, x + n) of row y (n <= kChunk).
+  void keyChunk(const float* row, int x, int n, int y, Keys* keys) const {
+    // Locals, not members, in the loop: it stores through pointers.
+    const float inv_f = inv_f_, cx = cx_, bf = bf_, z_cap = z_cap_, r2_in = r2_in_, r2_out = r2_out_;
+    const float min_d = min_d_, max_d = max_d_, m = margin_cells_, one_minus_m = 1.0f - margin_cells_;
+    const float ray_y = (static_cast<float>(y) - cy_) * inv_f;
+    const float ray_y2_plus_1 = ray_y * ray_y + 1.0f;
+    const float yf = static_cast<float>(y);
+    const float a0 = at_00_[0] + yf * per_y_[0], a1 = at_00_[1] + yf * per_y_[1], a2 = at_00_[2] + yf * per_y_[2];
+    const float s0 = per_x_[0], s1 = per_x_[1], s2 = per_x_[2];
+    const float o0 = origin_[0], o1 = origin_[1], o2 = origin_[2];
+    for (int k = 0; k < n; ++k) {
+      const float d = row[x + k];
+      const int measured = (d >= min_d) & (d <= max_d);  // 0 for NaN
+      const float z = std::min(bf / (measured ? d : bf), z_cap);
+      const float fx = static_cast<float>(x + k);
+      const float ray_x = (fx - cx) * inv_f;
+      const float r2 = z * z * (ray_x * ray_x + ray_y2_plus_1);
+      keys->range[k] = (measured == 0) | (r2 > r2_out) ? kNoHit : (r2 <= r2_in ? kInRange : kNearMax);
+      // The point in cells from the grid's first: g0 + z·(R_W_C·C_ray) / c.
+      const float q0 = o0 + z * (a0 + fx * s0), q1 = o1 + z * (a1 + fx * s1), q2 = o2 + z * (a2 + fx * s2);
+      // Truncation is floor for q >= 0; below 0, q - c < 0: unsure (outside the grid, or in double).
+      const int32_t c0 = static_cast<int32_t>(q0), c1 = static_cast<int32_t>(q1), c2 = static_cast<int32_t>(q2);
+      const float fc0 = static_cast<float>(c0), fc1 = static_cast<float>(c1), fc2 = static_cast<float>(c2);
+      const float f0 = q0 - fc0, f1 = q1 - fc1, f2 = q2 - fc2;
+      const int32_t unsure = ((f0 < m) | (f0 > one_minus_m)) | (((f1 < m) | (f1 > one_minus_m)) << 1) |
+                             (((f2 < m) | (f2 > one_minus_m)) << 2);
+      keys->unsure[k] = unsure;
+      keys->cell[0][k] = c0;
+      keys->cell[1][k] = c1;
+      keys->cell[2][k] = c2;
+    }
+  }
+
+ private:
+  float per_x_[3], per_y_[3], at_00_[3], origin_[3];
+  float margin_cells_;
+  bool in_float_;
+  float z_cap_, cx_, cy_, inv_f_, bf_;
+  float r2_in_, r2_out_;
+  float min_d_, max_d_;  ///< the disparities measured()
+};
 
 /// The cursor at the second slab, the first inner one.
 template <class Grid>
@@ -431,8 +574,64 @@ uint64_t LineDrawer::drawLine(const RayGrid& g, const Eigen::Vector3d& W_dir, co
   LineCursor cursor = innerCursor(g, W_dir, w);
   written += w.inside ? drawInnerCells(g.data, inner, profile, simd_, &cursor)
                       : drawInnerCellsClipped(g, w, inner, profile, &cursor);
-  written += drawEndCell(g, W_dir, w, profile, w.first_slab + (w.slabs - 1) * w.step,
-                         w.t_first + (w.slabs - 1) * w.dt);
+  written += drawEndCell(g, W_dir, w, profile, w.first_slab + (w.slabs - 1) * w.step, w.t_first + (w.slabs - 1) * w.dt);
+  return written;
+}
+
+uint64_t LineDrawer::drawPixelHits(const RayGrid& grid, const cv::Mat& disparity, int y_begin, int y_end,
+                                   const Eigen::Matrix3d& R_W_C, DrawStatistics* stats) const {
+  const RayGrid g = grid;  // a local: the flags' byte stores would make the members reload
+  const PixelHitRows keying(g, camera_, R_W_C);
+  const float hit = table_.hitLogOdds();
+  PixelHitRows::Keys keys;
+  uint64_t written = 0, pixels = 0;
+  auto drawExact = [&](int x, int y, float d) {
+    written += drawHitAtDepth(g, R_W_C, camera_.rayThroughPixel(x, y), camera_.depthFromDisparity(d), 0.0, hit);
+  };
+  const uint32_t size[3] = {static_cast<uint32_t>(g.size[0]), static_cast<uint32_t>(g.size[1]),
+                            static_cast<uint32_t>(g.size[2])};
+  int64_t last = -1;  // neighbours often share a cell
+  // Pixel k's keyed cell (its unsure axes again in double, as drawHitAt() keys them).
+  auto drawKeyed = [&](int x, int y, float d, int k) {
+    uint32_t cell[3] = {static_cast<uint32_t>(keys.cell[0][k]), static_cast<uint32_t>(keys.cell[1][k]),
+                        static_cast<uint32_t>(keys.cell[2][k])};  // a negative cell: huge
+    if (const int32_t unsure = keys.unsure[k]) {                  // rare on real images
+      const Eigen::Vector3d C_point = camera_.rayThroughPixel(x, y) * camera_.depthFromDisparity(d);
+      for (int i = 0; i < 3; ++i)
+        if ((unsure >> i) & 1)
+          cell[i] = floorToInt(pointComponent(R_W_C, C_point, g.W_origin, i) * g.inv_c) - g.origin_index[i];
+    }
+    if (cell[0] >= size[0] || cell[1] >= size[1] || cell[2] >= size[2]) return;  // outside the grid
+    ++written;
+    const int64_t grid_row = cell[1] + int64_t{cell[2]} * g.size[1];
+    const int64_t index = cell[0] + grid_row * g.size[0];
+    if (index == last) return;
+    last = index;
+    drawCell(g.data, index, hit);
+    if (g.hit_blocks) g.hit_blocks[grid_row * g.blocks_per_row + cell[0] / kInformationBlock] = 1;  // as drawHitAt()
+  };
+  for (int y = y_begin; y < y_end; ++y) {
+    const float* row = disparity.ptr<float>(y);
+    for (int x = 0; x < disparity.cols; x += PixelHitRows::kChunk) {
+      const int n = std::min(PixelHitRows::kChunk, disparity.cols - x);
+      if (!keying.anyMeasured(row, x, n)) continue;  // sky, no match
+      if (!keying.keysInFloat()) {
+        for (int k = 0; k < n; ++k)
+          if (keying.measured(row[x + k])) ++pixels, drawExact(x + k, y, row[x + k]);
+        continue;
+      }
+      keying.keyChunk(row, x, n, y, &keys);
+      for (int k = 0; k < n; ++k) {
+        if (keys.range[k] == PixelHitRows::kNoHit) continue;
+        ++pixels;
+        if (keys.range[k] == PixelHitRows::kNearMax)
+          drawExact(x + k, y, row[x + k]);
+        else
+          drawKeyed(x + k, y, row[x + k], k);
+      }
+    }
+  }
+  if (stats) stats->coordinate_transfers += pixels;
   return written;
 }
 
@@ -522,7 +721,17 @@ void LineDrawer::drawPyramidParts(const Descent& s, LocalGrid* grid, DrawStatist
   for (int y = 0; y < s.min_pyramid.height(top); ++y)
     for (int x = 0; x < s.min_pyramid.width(top); ++x) descend_from(above, top, x, y, 0.0);
   const int level = above.split_level;
-  drawParts(starts.size(), s.grid, grid, stats, [&](size_t part, const RayGrid& g, DrawStatistics* part_stats) {
+  // With pixel hits, bands of the image's rows follow the blocks as parts.
+  const cv::Mat& pixels = s.min_pyramid.level(0);  // the input, invalid pixels +inf
+  const int bands = s.pixel_hits ? std::min<int>(pixels.rows, static_cast<int>(workers * kHitBandsPerWorker)) : 0;
+  const Eigen::Matrix3d R_W_C = s.T_W_C.linear();
+  drawParts(starts.size() + bands, s.grid, grid, stats, [&](size_t part, const RayGrid& g, DrawStatistics* part_stats) {
+    if (part >= starts.size()) {
+      const int band = static_cast<int>(part - starts.size());
+      part_stats->grid_cells_drawn +=
+          drawPixelHits(g, pixels, band * pixels.rows / bands, (band + 1) * pixels.rows / bands, R_W_C, part_stats);
+      return;
+    }
     Descent mine = s;
     mine.grid = g;
     mine.stats = part_stats;
@@ -569,10 +778,10 @@ void LineDrawer::drawImage(const cv::Mat& disparity, const Eigen::Isometry3d& T_
                 const RangeProfile profile = pixelProfile(camera_, table_, x, static_cast<double>(y), d);
                 part_stats->grid_cells_drawn +=
                     drawLine(g, R_W_C * C_ray.normalized(), profile, 0.0, std::numeric_limits<double>::infinity());
-                if (profile.hasPointHit())
-                  part_stats->grid_cells_drawn +=
-                      drawHitAtDepth(g, R_W_C, C_ray, camera_.depthFromDisparity(d), 0.0, profile.hit_log_odds);
               }
+              if (g.hit_blocks)  // the surface profile: each measured pixel's hit
+                part_stats->grid_cells_drawn +=
+                    drawPixelHits(g, disparity, static_cast<int>(y), static_cast<int>(y) + 1, R_W_C, nullptr);
             });
 }
 
@@ -605,7 +814,7 @@ uint64_t LineDrawer::drawPixel(const Descent& s, int level, int x, int y, float 
   const RangeProfile profile = profileOf(s, norm, d_px);
   const uint64_t written = drawLine(s.grid, s.T_W_C.linear() * (C_ray / norm), profile, z_begin * norm,
                                     std::numeric_limits<double>::infinity());
-  if (!profile.hasPointHit()) return written;
+  if (!profile.hasPointHit() || s.pixel_hits) return written;
   return written + drawHitAtDepth(s.grid, s.T_W_C.linear(), C_ray, camera_.depthFromDisparity(d_px), z_begin,
                                   profile.hit_log_odds);
 }
@@ -661,7 +870,7 @@ void LineDrawer::descendBounded(const Descent& s, int level, int x, int y, doubl
   // depths leave no hole is drawn as one free line and its sub-blocks' hits.
   SpanLeaves leaves;
   if (fine_enough && surface_spans_ && table_.hitLogOdds() > 0.0f && isSpan(s, level, x, y, &leaves)) {
-    drawSpan(s, level, x, y, d_max, leaves, z_begin);
+    drawSpan(s, level, x, y, d_max, z_begin);
     return;
   }
   // The block's rays lie within one cell of each other up to the depth
@@ -694,9 +903,6 @@ bool LineDrawer::gatherLeaves(const Descent& s, int level, int x, int y, SpanLea
     const int i = out->count++;
     out->lo[i] = lo;
     out->hi[i] = hi;
-    out->level[i] = level;
-    out->x[i] = x;
-    out->y[i] = y;
     return true;
   }
   const int w = s.min_pyramid.width(level - 1);
@@ -723,13 +929,12 @@ bool LineDrawer::isSpan(const Descent& s, int level, int x, int y, SpanLeaves* l
   return true;
 }
 
-void LineDrawer::drawSpan(const Descent& s, int level, int x, int y, float d_max, const SpanLeaves& leaves,
-                          double z_begin) const {
+void LineDrawer::drawSpan(const Descent& s, int level, int x, int y, float d_max, double z_begin) const {
   constexpr double kToTheEnd = std::numeric_limits<double>::infinity();
   // Free space along the block's centre ray up to the nearest measurement's
-  // gap; its hit is drawn with its leaf's, where its own line would put it.
-  // Up to the front of its profile with the sky value, as a descending
-  // block's shared stretch: the sky guard silences it beside a hit.
+  // gap (its pixels' hits come from drawPixelHits()). Up to the front of its
+  // profile with the sky value, as a descending block's shared stretch: the
+  // sky guard silences it beside a hit.
   const Eigen::Vector3d C_ray = blockRay(level, x, y);
   const double norm = C_ray.norm();
   RangeProfile nearest = profileOf(s, norm, d_max);
@@ -737,15 +942,6 @@ void LineDrawer::drawSpan(const Descent& s, int level, int x, int y, float d_max
   nearest.free_log_odds = s.free_profile.free_log_odds;
   ++s.stats->coordinate_transfers;
   s.stats->grid_cells_drawn += drawLine(s.grid, s.T_W_C.linear() * (C_ray / norm), nearest, z_begin * norm, kToTheEnd);
-  // Each leaf's hit: the cell its own line would give it (drawPixel()).
-  const Eigen::Matrix3d R_W_C = s.T_W_C.linear();
-  const float hit = table_.hitLogOdds();
-  for (int i = 0; i < leaves.count; ++i) {
-    const Eigen::Vector3d C_leaf = blockRay(leaves.level[i], leaves.x[i], leaves.y[i]);
-    ++s.stats->coordinate_transfers;
-    s.stats->grid_cells_drawn +=
-        drawHitAtDepth(s.grid, R_W_C, C_leaf, camera_.depthFromDisparity(leaves.lo[i]), z_begin, hit);
-  }
 }
 
 void LineDrawer::drawPyramidBounded(const DisparityPyramid& min_pyramid, const DisparityPyramid& max_pyramid,
@@ -754,7 +950,8 @@ void LineDrawer::drawPyramidBounded(const DisparityPyramid& min_pyramid, const D
   CV_Assert(min_pyramid.type() == PyramidType::kMinDisparity && max_pyramid.type() == PyramidType::kMaxDisparity &&
             min_pyramid.topLevel() == max_pyramid.topLevel());
   stats->coordinate_transfers += 1;  // the camera centre
-  const Descent s = descent(min_pyramid, &max_pyramid, &bound, T_W_C, grid, stats);
+  Descent s = descent(min_pyramid, &max_pyramid, &bound, T_W_C, grid, stats);
+  s.pixel_hits = s.grid.hit_blocks != nullptr;  // the surface profile
   drawPyramidParts(s, grid, stats, [this](const Descent& d, int level, int x, int y, double z_begin) {
     descendBounded(d, level, x, y, z_begin);
   });

@@ -9,6 +9,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <numeric>
 #include <random>
 #include <string>
@@ -200,6 +201,102 @@ TEST(SurfaceProfile, EachHitLandsInItsPointsCell) {
   EXPECT_LE(occupied_elsewhere, occupied / 100);
 }
 
+namespace {
+
+/// The cells with a point hit (log-odds > 0) as global indices, sorted.
+std::vector<Eigen::Vector3i> occupiedCells(const LocalGrid& grid) {
+  std::vector<Eigen::Vector3i> cells;
+  const Eigen::Vector3i size = grid.size();
+  for (int z = 0; z < size.z(); ++z)
+    for (int y = 0; y < size.y(); ++y)
+      for (int x = 0; x < size.x(); ++x)
+        if (grid.at(x, y, z) > 0.0f) cells.push_back(grid.originIndex() + Eigen::Vector3i(x, y, z));
+  return cells;
+}
+
+/// A real matcher's errors, roughly: streaks of disparity spread by up to
+/// @p spread_px, outliers, and holes.
+cv::Mat withMatcherErrors(const cv::Mat& disparity, double spread_px, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> spread(-static_cast<float>(spread_px), static_cast<float>(spread_px));
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  cv::Mat out = disparity.clone();
+  for (int y = 0; y < out.rows; ++y)
+    for (int x = 0; x < out.cols; ++x) {
+      float& d = out.at<float>(y, x);
+      const float u = unit(rng);
+      if (u < 0.05f)
+        d = std::numeric_limits<float>::quiet_NaN();  // no match
+      else if (u < 0.07f)
+        d = 1.0f + 60.0f * unit(rng);  // an outlier
+      else if (d > 0.0f)
+        d = std::max(0.5f, d + spread(rng));
+    }
+  return out;
+}
+
+}  // namespace
+
+// The default (bounded pyramid, surface profile) draws each pixel's hit,
+// not one per block: its occupied cells are per-pixel line's exactly, and
+// each is the cell of one pixel's point T_W_C·(z·C_ray) (eqs. 1, 2), for
+// any pose (cells off the origin, a wall on a cell face, turned cameras),
+// real-matcher-like disparities and 1 or 2 threads. One hit per block, at
+// its farthest disparity, lost the nearer ones (a real matcher's
+// disparities in a block spread over more than a cell of depth).
+TEST(SurfaceProfile, BoundedPyramidOccupiesThePixelLinesCells) {
+  SyntheticScene scene;
+  scene.addBox({-50.0, -50.0, -1.0}, {100.0, 50.0, 0.0});  // the ground, on a cell face
+  scene.addBox({14.0, -40.0, -5.0}, {16.0, 40.0, 10.0});   // its faces on cell faces
+  scene.addBox({6.3, -1.1, 0.0}, {6.7, -0.7, 3.0});
+  const StereoCameraConfig camera_config;
+  const StereoCameraModel cam(camera_config);
+  const std::vector<Eigen::Isometry3d> poses = {
+      lookingAlongX(Eigen::Vector3d(0.0, 0.0, 2.0)),
+      lookingAlongX(Eigen::Vector3d(0.37, -0.81, 2.13), 0.3, 0.1),
+      lookingAlongX(Eigen::Vector3d(-3.0, 2.0, 6.0), -0.4, 0.35),
+  };
+  size_t checked = 0;
+  for (size_t i = 0; i < poses.size(); ++i)
+    for (double spread_px : {0.0, 1.5}) {
+      SCOPED_TRACE(::testing::Message() << "pose " << i << ", spread " << spread_px << " px");
+      const cv::Mat disparity = withMatcherErrors(renderDisparity(scene, cam, poses[i]), spread_px, 7 + i);
+      DisparityDrawer line(camera_config, surfaceDrawing(DrawingAlgorithm::kLine));
+      LocalGrid line_grid;
+      line.draw(disparity, poses[i], &line_grid);
+      const std::vector<Eigen::Vector3i> expected = occupiedCells(line_grid);
+      ASSERT_GT(expected.size(), 1000u);
+      for (int threads : {1, 2}) {
+        DrawingConfig config = surfaceDrawing(DrawingAlgorithm::kLinePyramidBounded);
+        config.threads = threads;
+        DisparityDrawer bounded(camera_config, config);
+        LocalGrid grid;
+        bounded.draw(disparity, poses[i], &grid);
+        EXPECT_EQ(occupiedCells(grid), expected) << threads << " threads";
+        ++checked;
+      }
+      // Each occupied cell holds a pixel's point.
+      std::vector<Eigen::Vector3i> point_cells;
+      for (int y = 0; y < disparity.rows; ++y)
+        for (int x = 0; x < disparity.cols; ++x) {
+          const float d = disparity.at<float>(y, x);
+          if (!cam.isValidDisparity(d) || !measuresRange(cam, d)) continue;
+          const Eigen::Vector3d C_point = cam.rayThroughPixel(x, y) * cam.depthFromDisparity(d);
+          if (C_point.norm() <= camera_config.max_range_m)
+            point_cells.push_back(LocalGrid::globalIndex(poses[i] * C_point, kCell));
+        }
+      auto less = [](const Eigen::Vector3i& a, const Eigen::Vector3i& b) {
+        return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
+      };
+      std::sort(point_cells.begin(), point_cells.end(), less);
+      point_cells.erase(std::unique(point_cells.begin(), point_cells.end()), point_cells.end());
+      std::vector<Eigen::Vector3i> sorted = expected;
+      std::sort(sorted.begin(), sorted.end(), less);
+      EXPECT_EQ(sorted, point_cells);
+    }
+  EXPECT_EQ(checked, 12u);
+}
+
 // The thin obstacles of the bounded-pyramid tests: with the surface profile
 // the bounded pyramid still keeps the post before the wall and the wire
 // against the sky, none of their cells called free.
@@ -349,12 +446,13 @@ TEST(SurfaceProfile, GapGuardFreesTheGapAwayFromHits) {
   EXPECT_EQ(columns, 64);
 }
 
-// Why the gap guard is off by default: a 0.2 m post 0.3-0.6 m in front of a
-// wall at 20 m lies in the gap of the wall's line, over which the bounded
-// pyramid's bound lets one line cover the block. Without the guard the post
-// is never called free (no information); with it, the gap farther than a
-// cell from the wall's hit is freed, and the post with it. Per-pixel
-// drawing hits the post's face either way and calls none of it free.
+// A 0.2 m post 0.3-0.6 m in front of a wall at 20 m lies in the gap of the
+// wall's line, over which the bounded pyramid's bound lets one line cover
+// the block. The post's pixels still give their own hits: its face is
+// occupied in the cells per-pixel drawing gives it and none of the post is
+// called free, with the gap guard off (the default) or on. (One hit per
+// block, at its farthest disparity, left the post unknown, and the guard
+// freed it.)
 TEST(SurfaceProfile, BoundedPyramidKeepsAPostBeforeAWall) {
   for (double gap_m : {0.3, 0.45, 0.6}) {
     SCOPED_TRACE(gap_m);
@@ -376,14 +474,12 @@ TEST(SurfaceProfile, BoundedPyramidKeepsAPostBeforeAWall) {
         }
       return free_zero_occupied;
     };
-    const std::array<int, 3> all_unknown{0, 320, 0};
-    EXPECT_EQ(postCells(DrawingAlgorithm::kLinePyramidBounded, InverseSensorModelConfig().gap_guard_cells),
-              all_unknown);
-    EXPECT_GT(postCells(DrawingAlgorithm::kLinePyramidBounded, 1)[0], 200);  // the guard's hole
-    // The post's face is hit; behind it, inside the post, a hit says nothing.
-    const std::array<int, 3> line = postCells(DrawingAlgorithm::kLine, 1);
+    const int default_guard = InverseSensorModelConfig().gap_guard_cells;
+    const std::array<int, 3> line = postCells(DrawingAlgorithm::kLine, default_guard);
     EXPECT_EQ(line[0], 0);
     EXPECT_GE(line[2], 80);  // at least the cell of the face: one column of sample points
+    EXPECT_EQ(postCells(DrawingAlgorithm::kLinePyramidBounded, default_guard), line);
+    EXPECT_EQ(postCells(DrawingAlgorithm::kLinePyramidBounded, 1)[0], 0);
   }
 }
 
