@@ -590,7 +590,6 @@ uint64_t LineDrawer::drawPixelHits(const RayGrid& grid, const cv::Mat& disparity
   };
   const uint32_t size[3] = {static_cast<uint32_t>(g.size[0]), static_cast<uint32_t>(g.size[1]),
                             static_cast<uint32_t>(g.size[2])};
-  int64_t last = -1;  // neighbours often share a cell
   // Pixel k's keyed cell (its unsure axes again in double, as drawHitAt() keys them).
   auto drawKeyed = [&](int x, int y, float d, int k) {
     uint32_t cell[3] = {static_cast<uint32_t>(keys.cell[0][k]), static_cast<uint32_t>(keys.cell[1][k]),
@@ -604,10 +603,7 @@ uint64_t LineDrawer::drawPixelHits(const RayGrid& grid, const cv::Mat& disparity
     if (cell[0] >= size[0] || cell[1] >= size[1] || cell[2] >= size[2]) return;  // outside the grid
     ++written;
     const int64_t grid_row = cell[1] + int64_t{cell[2]} * g.size[1];
-    const int64_t index = cell[0] + grid_row * g.size[0];
-    if (index == last) return;
-    last = index;
-    drawCell(g.data, index, hit);
+    drawCell(g.data, cell[0] + grid_row * g.size[0], hit);  // a neighbour's cell again: cheaper than a branch
     if (g.hit_blocks) g.hit_blocks[grid_row * g.blocks_per_row + cell[0] / kInformationBlock] = 1;  // as drawHitAt()
   };
   for (int y = y_begin; y < y_end; ++y) {
