@@ -352,6 +352,11 @@ void DisparityMapper::process(const char* what, MapImage&& map_image) {
       NODELET_WARN_THROTTLE(kWarnThrottleS, "refused a %s: %s", what, result.why.c_str());
     return;
   }
+  if (!result.info_mismatch.empty()) {
+    last_problem_ = result.info_mismatch;
+    NODELET_WARN_THROTTLE(kWarnThrottleS, "%s (%lu such images so far)", result.info_mismatch.c_str(),
+                          static_cast<unsigned long>(mapping_->counters().info_mismatch));
+  }
   if (result.mapped_nothing) {
     last_problem_ = result.why;
     NODELET_WARN_THROTTLE(kWarnThrottleS, "%s (%lu such images so far)", result.why.c_str(),
@@ -380,7 +385,7 @@ void DisparityMapper::process(const char* what, MapImage&& map_image) {
 void DisparityMapper::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   std::lock_guard<std::mutex> lock(mutex_);
   const FrameCounters& n = mapping_->counters();
-  const bool dropping = n.no_transform + filter_dropped_ + n.refused + n.mapped_nothing > 0;
+  const bool dropping = n.no_transform + filter_dropped_ + n.refused + n.mapped_nothing + n.info_mismatch > 0;
   if (!mapping_->refusedSetup().empty())
     status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "cannot map with this camera: " + mapping_->refusedSetup());
   else
@@ -393,6 +398,7 @@ void DisparityMapper::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
   status.add("dropped: no transform", n.no_transform + filter_dropped_);
   status.add("dropped: invalid input", n.refused);
   status.add("mapped nothing", n.mapped_nothing);
+  status.add("camera_info not used", n.info_mismatch);
   status.add("time jumps back", time_jumps_back_);
   status.add("last processing time [ms]", last_processing_ms_);
   status.add("max processing time [ms]", max_processing_ms_);

@@ -65,6 +65,20 @@ void toDisparityImageMsg(const cv::Mat& disparity, const std_msgs::Header& heade
   msg->valid_window.height = disparity.rows;
 }
 
+bool cameraInfoFits(const stereo_msgs::DisparityImage& msg, const sensor_msgs::CameraInfo& info, std::string* why) {
+  if (info.width != msg.image.width || info.height != msg.image.height) {
+    if (why)
+      *why = "camera_info is " + std::to_string(info.width) + " x " + std::to_string(info.height) +
+             " px, the disparity image " + std::to_string(msg.image.width) + " x " + std::to_string(msg.image.height);
+    return false;
+  }
+  if (!(info.P[0] > 0.0)) {
+    if (why) *why = "camera_info has no rectified projection (P[0] is not > 0)";
+    return false;
+  }
+  return true;
+}
+
 bool cameraFromDisparityImage(const stereo_msgs::DisparityImage& msg, const sensor_msgs::CameraInfo* info,
                               const DisparityMapperParameters& params, StereoCameraConfig* camera, std::string* why) {
   StereoCameraConfig c = params.camera;
@@ -76,7 +90,7 @@ bool cameraFromDisparityImage(const stereo_msgs::DisparityImage& msg, const sens
   c.min_disparity_px = std::max(0.0, static_cast<double>(msg.min_disparity));
   c.max_disparity_px = msg.max_disparity > msg.min_disparity ? static_cast<double>(msg.max_disparity)
                                                              : std::numeric_limits<double>::infinity();
-  if (info && info->width == msg.image.width && info->height == msg.image.height && info->P[0] > 0.0) {
+  if (info && cameraInfoFits(msg, *info, nullptr)) {
     c.cx_px = info->P[2];
     c.cy_px = info->P[6];
   } else {

@@ -60,6 +60,11 @@ OccupancyUpdatePtr FrameMapping::map(const stereo_msgs::DisparityImageConstPtr& 
   StereoCameraConfig camera;
   if (!cameraFromDisparityImage(*msg, info.get(), params_, &camera, &why))
     return finish(FrameOutcome::kRefused, why, result);
+  if (info && !cameraInfoFits(*msg, *info, &result->info_mismatch)) {
+    ++counters_.info_mismatch;
+    result->info_mismatch += ": its principal point is not used, (" + std::to_string(camera.cx_px) + ", " +
+                             std::to_string(camera.cy_px) + ") px is (cx_px, cy_px or the image's centre)";
+  }
   try {
     const cv_bridge::CvImageConstPtr image = cv_bridge::toCvShare(msg->image, msg);  // a view, no copy
     return mapDisparity(image->image, msg->header, camera, tf, now, result);

@@ -124,6 +124,38 @@ TEST_F(PipelineTest, AnImageThatMapsNothingSaysWhy) {
   EXPECT_EQ(mapping.counters().mapped_nothing, 1u);
 }
 
+// A camera_info that disagrees with the disparity image (another size, no
+// rectified projection) cannot give the principal point: the image is mapped
+// with the image's centre, and that is said and counted, not silent.
+TEST_F(PipelineTest, ACameraInfoThatDisagreesIsSaidAndCounted) {
+  FrameMapping mapping{DisparityMapperParameters()};
+  auto info = boost::make_shared<sensor_msgs::CameraInfo>();
+  info->width = 640;
+  info->height = 480;
+  info->P[0] = info->P[5] = 700.0;
+  info->P[2] = 300.0;  // not the centre: used when it fits
+  info->P[6] = 250.0;
+  FrameResult result;
+  ASSERT_TRUE(mapping.map(frame(10.0), info, tf_, ros::Time(10.0), &result)) << result.why;
+  EXPECT_EQ(result.info_mismatch, "");
+  auto full_size = boost::make_shared<sensor_msgs::CameraInfo>(*info);  // the raw camera's, 2 x 2 binned images
+  full_size->width = 1280;
+  full_size->height = 960;
+  ASSERT_TRUE(mapping.map(frame(11.0), full_size, tf_, ros::Time(11.0), &result)) << result.why;
+  EXPECT_NE(result.info_mismatch.find("camera_info is 1280 x 960 px, the disparity image 640 x 480"),
+            std::string::npos)
+      << result.info_mismatch;
+  EXPECT_NE(result.info_mismatch.find("(319.500000, 239.500000) px is"), std::string::npos) << result.info_mismatch;
+  auto unrectified = boost::make_shared<sensor_msgs::CameraInfo>(*info);
+  unrectified->P[0] = 0.0;
+  ASSERT_TRUE(mapping.map(frame(12.0), unrectified, tf_, ros::Time(12.0), &result)) << result.why;
+  EXPECT_NE(result.info_mismatch.find("no rectified projection"), std::string::npos) << result.info_mismatch;
+  ASSERT_TRUE(mapping.map(frame(13.0), nullptr, tf_, ros::Time(13.0), &result)) << result.why;
+  EXPECT_EQ(result.info_mismatch, "");  // none given: the parameters' or the centre, as documented
+  EXPECT_EQ(mapping.counters().info_mismatch, 2u);
+  EXPECT_EQ(mapping.counters().mapped, 4u);
+}
+
 // A camera the drawer refuses is tried once and reported once; its images
 // are refused with the same reason until the parameters change.
 TEST_F(PipelineTest, ARefusedCameraSetUpIsReportedOnce) {

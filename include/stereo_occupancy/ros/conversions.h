@@ -36,6 +36,10 @@ bool checkImageLayout(const sensor_msgs::Image& image, uint64_t max_pixels, std:
 /// the message's delta_d), the principal point from @p info when given, else
 /// from the parameters (or the image centre), range limits from the
 /// parameters. False, with the reason, if the message's numbers are unusable.
+/// True if @p info can give @p msg's principal point (cameraFromDisparityImage()):
+/// the same size and a rectified projection (P[0] > 0); else what differs in @p why.
+bool cameraInfoFits(const stereo_msgs::DisparityImage& msg, const sensor_msgs::CameraInfo& info, std::string* why);
+
 bool cameraFromDisparityImage(const stereo_msgs::DisparityImage& msg, const sensor_msgs::CameraInfo* info,
                               const DisparityMapperParameters& params, StereoCameraConfig* camera, std::string* why);
 

@@ -44,6 +44,9 @@ struct FrameResult {
   /// kMapped, but no pixel said anything (the update is empty): why names
   /// the pixels' counts and the message's disparity range.
   bool mapped_nothing = false;
+  /// kMapped, but with a camera_info that disagrees with the image (another
+  /// size, or not rectified): what it said and what was used instead.
+  std::string info_mismatch;
 };
 
 /// Images given to FrameMapping and what became of them.
@@ -53,6 +56,7 @@ struct FrameCounters {
   uint64_t no_transform = 0;
   uint64_t refused = 0;
   uint64_t mapped_nothing = 0;  ///< mapped, but with an empty update (FrameResult::mapped_nothing)
+  uint64_t info_mismatch = 0;   ///< mapped, its camera_info not used (FrameResult::info_mismatch)
 };
 
 /// Image + camera + pose -> checks -> draw (DisparityDrawer) -> update.
