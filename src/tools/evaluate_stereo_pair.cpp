@@ -1,15 +1,15 @@
 // evaluate_stereo_pair: one real rectified stereo pair with its true
 // disparities (by default the Middlebury "Aloe" pair that Debian's opencv-doc
-// ships), matched by OpenCV's StereoSGBM as stereo_image_proc matches, then
-// mapped from the same disparity image by the mapper (its defaults), by the
-// per-pixel line drawing and by OctoMap's insertPointCloud: occupied
-// precision, recall and surface called free against the surface the true
-// disparities give, overall and per range band, as a Markdown table.
+// ships), matched by OpenCV's StereoSGBM (a 5 px block, or stereo_image_proc's
+// defaults with --sgbm stereo_image_proc), then mapped from the same
+// disparity image by the mapper (its defaults), by the per-pixel line drawing
+// and by OctoMap's insertPointCloud: occupied precision, recall and surface
+// called free against the surface the true disparities give, overall and per
+// range band, as a Markdown table.
 // A benchmark: it prints figures and asserts nothing.
 
 #include <octomap/octomap.h>
 
-#include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -27,6 +27,7 @@
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
 #include "stereo_occupancy/sim/map_evaluation.h"
+#include "stereo_occupancy/sim/stereo_matching.h"
 #include "tool_support.h"
 
 namespace so = stereo_occupancy;
@@ -38,28 +39,14 @@ const char* kUsage =
     "usage: evaluate_stereo_pair [--left FILE --right FILE --truth FILE] [--truth-scale S]\n"
     "                            [--focal F_FULL_PX] [--baseline B_M] [--shrink N] [--max-range M]\n"
     "                            [--resolution M [--resolution M ...]] [--algorithm NAME] [--model NAME=VALUE ...]\n"
+    "                            [--sgbm fine|stereo_image_proc]\n"
     "Defaults: opencv-doc's aloeL.jpg, aloeR.jpg and aloeGT.png (disparity = value / S, S = 1 at full size;\n"
     "a floating-point truth, e.g. a TIFF, is read as disparities),\n"
     "the Middlebury 2006 focal length 3740 px and baseline 0.16 m, images shrunk by 4 (as a 64-disparity\n"
-    "matcher needs), max range 15 m, cells of 0.1 and 0.05 m. --model: a numeric sensor-model parameter.\n";
+    "matcher needs), max range 15 m, cells of 0.1 and 0.05 m. --model: a numeric sensor-model parameter.\n"
+    "--sgbm: StereoSGBM with a 5 px block (fine, the default) or stereo_image_proc's defaults (a 15 px block).\n";
 
 const std::string kData = "/usr/share/doc/opencv-doc/examples/data/";
-
-/// StereoSGBM as stereo_image_proc sets it up for a 64-disparity search: a
-/// 5 px block, OpenCV's smoothness penalties 8 and 32 · block², uniqueness
-/// 15 %, speckles below 100 px or 4 px of spread removed, left-right check.
-constexpr int kDisparities = 64;
-constexpr int kBlockPx = 5;
-
-cv::Mat sgbmDisparity(const cv::Mat& left, const cv::Mat& right) {
-  auto sgbm = cv::StereoSGBM::create(0, kDisparities, kBlockPx, 8 * kBlockPx * kBlockPx, 32 * kBlockPx * kBlockPx,
-                                     /*disp12MaxDiff=*/1, /*preFilterCap=*/31, /*uniquenessRatio=*/15,
-                                     /*speckleWindowSize=*/100, /*speckleRange=*/4);
-  cv::Mat fixed_point, disparity;
-  sgbm->compute(left, right, fixed_point);
-  fixed_point.convertTo(disparity, CV_32F, 1.0 / cv::StereoMatcher::DISP_SCALE);  // invalid: -1, no match
-  return disparity;
-}
 
 std::string pct(double v) {
   std::ostringstream o;
@@ -121,6 +108,8 @@ int run(int argc, char** argv) {
   std::vector<double> resolutions;
   std::map<std::string, double> model_values;
   so::DrawingAlgorithm algorithm = so::DrawingConfig::mapperDefaults().algorithm;
+  so::SgbmParameters sgbm = so::SgbmParameters::fineBlock();
+  std::string sgbm_name = "fine";
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help") {
@@ -141,6 +130,10 @@ int run(int argc, char** argv) {
     } else if (a == "--algorithm") {
       if (!so::parseDrawingAlgorithm(tools::nextValue(argc, argv, &i), &algorithm))
         throw tools::UsageError("--algorithm must be one of " + so::drawingAlgorithmNames());
+    } else if (a == "--sgbm") {
+      sgbm_name = tools::nextValue(argc, argv, &i);
+      if (sgbm_name == "stereo_image_proc") sgbm = so::SgbmParameters();
+      else if (sgbm_name != "fine") throw tools::UsageError("--sgbm must be fine or stereo_image_proc");
     } else if (a == "--model") {
       tools::addNameValue(argc, argv, &i, &model_values);
     } else {
@@ -157,7 +150,7 @@ int run(int argc, char** argv) {
   cv::resize(left, left, size, 0, 0, cv::INTER_AREA);
   cv::resize(right, right, size, 0, 0, cv::INTER_AREA);
   cv::resize(truth, truth, size, 0, 0, cv::INTER_NEAREST);
-  const cv::Mat disparity = sgbmDisparity(left, right);
+  const cv::Mat disparity = so::matchSgbm(left, right, sgbm);
 
   so::StereoCameraConfig camera_config;
   camera_config.width_px = size.width;
@@ -168,7 +161,7 @@ int run(int argc, char** argv) {
   camera_config.baseline_m = baseline_m;
   camera_config.max_range_m = max_range_m;
   camera_config.min_disparity_px = 0.0;
-  camera_config.max_disparity_px = kDisparities - 1;
+  camera_config.max_disparity_px = sgbm.maxDisparityPx();
   std::string why;
   if (!camera_config.isValid(&why)) throw tools::UsageError(why);
   const so::StereoCameraModel camera(camera_config);
@@ -192,7 +185,7 @@ int run(int argc, char** argv) {
 
   std::cout << "Real stereo: " << left_file << " and " << right_file << ", " << size.width << " x " << size.height
             << " px (shrunk by " << shrink << "), f = " << camera_config.focal_length_px << " px, b = " << baseline_m
-            << " m; StereoSGBM (64 disparities, 5 px block) matched " << pct(double(matched) / size.area())
+            << " m; " << sgbm.describe() << " (" << sgbm_name << ") matched " << pct(double(matched) / size.area())
             << " % of the pixels; the truth from " << truth_file << " (" << truth_points.size() << " points within "
             << max_range_m << " m).\n\n"
             << "Each method overall and per range band (near, middle, far: thirds of the true surface\n"
