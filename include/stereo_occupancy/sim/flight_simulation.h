@@ -11,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include "stereo_occupancy/sim/scene_images.h"
+#include "stereo_occupancy/sim/stereo_matching.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
 #include "stereo_occupancy/stereo_camera_model.h"
 
@@ -30,6 +32,16 @@ struct StereoEffects {
   int sky_unmatched_above_row = -1;
 };
 
+/// How a flight's disparity images come about.
+enum class StereoMatcher {
+  kGaussian,  ///< the exact disparities with StereoEffects (noise, unmatched pixels): the paper's figures
+  kSgbm,      ///< textured left and right images matched by StereoSGBM, as stereo_image_proc matches
+};
+
+/// "gaussian" or "sgbm" into @p matcher; false for another name.
+bool parseStereoMatcher(const std::string& name, StereoMatcher* matcher);
+const char* toString(StereoMatcher matcher);
+
 /// One flight: scene, camera, mount and trajectory.
 struct FlightScenario {
   std::string name;
@@ -39,6 +51,9 @@ struct FlightScenario {
   Eigen::Isometry3d T_B_C;         ///< camera optical frame in the body frame (REP-103 body: x forward, z up)
   std::vector<Eigen::Isometry3d> T_W_B;  ///< body poses, one per frame
   double frame_rate_hz = 10.0;
+  StereoMatcher matcher = StereoMatcher::kGaussian;
+  SgbmParameters sgbm;         ///< kSgbm: the matcher
+  ImageAppearance appearance;  ///< kSgbm: what its cameras see
 
   /// Optical frame pose of frame i.
   Eigen::Isometry3d cameraPose(size_t i) const { return T_W_B[i] * T_B_C; }
@@ -60,9 +75,26 @@ FlightScenario makeScenario(const std::string& name);
 /// (+inf for sky) in @p true_depth.
 cv::Mat renderTrueDisparity(const FlightScenario& scenario, size_t frame, cv::Mat* true_depth = nullptr);
 
-/// Frame i as the matcher sees it: noise, quantisation, unmatched and
-/// texture-less pixels, search range. Deterministic for (seed, frame).
+/// Frame i as the matcher sees it, deterministic for (seed, frame). kGaussian:
+/// the exact disparities with noise, quantisation, unmatched and
+/// texture-less pixels and the search range of StereoEffects. kSgbm:
+/// renderStereoImages() matched by StereoSGBM with scenario.sgbm (unmatched:
+/// NaN; the pixels left of the search range too).
 cv::Mat renderStereoFrame(const FlightScenario& scenario, size_t frame, uint32_t seed);
+
+/// Makes @p scenario's frames with @p matcher; kSgbm also sets the effects'
+/// search range to the SGBM's, which the DisparityImage messages carry.
+void useMatcher(FlightScenario* scenario, StereoMatcher matcher);
+
+/// A rectified pair of 8-bit grey camera images.
+struct StereoImages {
+  cv::Mat left, right;
+};
+
+/// Frame i's textured images: the left camera is the flight's camera, the
+/// right one sits a baseline along the left optical frame's +x; each with
+/// its own sensor noise from (seed, frame).
+StereoImages renderStereoImages(const FlightScenario& scenario, size_t frame, uint32_t seed);
 
 /// A one-line-per-object text description of the scene (for the record).
 std::string describeScene(const SyntheticScene& scene);
