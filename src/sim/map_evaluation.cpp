@@ -4,8 +4,10 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <unordered_map>
 
 #include "stereo_occupancy/local_grid.h"
+#include "stereo_occupancy/sim/scene_images.h"
 
 namespace stereo_occupancy {
 
@@ -163,6 +165,118 @@ MapQuality evaluateMap(const octomap::OcTree& map, const SyntheticScene& scene, 
     q.empty_known_free += n && !map.isNodeOccupied(n);
   }
   return q;
+}
+
+size_t ObstacleZones::observedCount() const {
+  return static_cast<size_t>(std::count_if(zones.begin(), zones.end(), [](const auto& z) { return !z.empty(); }));
+}
+
+namespace {
+/// A cell holding the surface points of several objects.
+constexpr int kSharedCell = -3;
+
+/// The cells holding each box's and the ground's surface points seen through
+/// the pixels of the frames, in range.
+void collectSurfaces(const FlightScenario& scenario, double resolution_m, double max_range_m, int frame_step,
+                     int pixel_step, std::vector<std::unordered_set<uint64_t>>* boxes,
+                     std::unordered_set<uint64_t>* ground) {
+  const StereoCameraModel camera(scenario.camera);
+  boxes->assign(scenario.scene.boxes.size(), {});
+  for (size_t f = 0; f < scenario.T_W_B.size(); f += static_cast<size_t>(frame_step)) {
+    const Eigen::Isometry3d T_W_C = scenario.cameraPose(f);
+    const PixelHits hits = castPixelRays(scenario.scene, camera, T_W_C);
+    for (int y = pixel_step / 2; y < scenario.camera.height_px; y += pixel_step)
+      for (int x = pixel_step / 2; x < scenario.camera.width_px; x += pixel_step) {
+        const int object = hits.object.at<int>(y, x);
+        const double range = hits.range_m.at<double>(y, x);
+        if (object == SyntheticScene::kHitNothing || !(range <= max_range_m)) continue;
+        const Eigen::Vector3d W_dir = T_W_C.linear() * camera.rayThroughPixel(x, y).normalized();
+        // Just behind the hit point, as in observeGroundTruth().
+        const uint64_t key = packCell(LocalGrid::globalIndex(T_W_C.translation() + (range + 1e-6) * W_dir, resolution_m));
+        (object >= 0 ? (*boxes)[static_cast<size_t>(object)] : *ground).insert(key);
+      }
+  }
+}
+}  // namespace
+
+ObstacleZones observeObstacles(const FlightScenario& scenario, double resolution_m, double max_range_m,
+                               int frame_step, int pixel_step) {
+  std::vector<std::unordered_set<uint64_t>> surfaces;
+  std::unordered_set<uint64_t> ground;
+  collectSurfaces(scenario, resolution_m, max_range_m, frame_step, pixel_step, &surfaces, &ground);
+  std::unordered_map<uint64_t, int> owner;  // a surface cell's one object, or kSharedCell
+  for (uint64_t key : ground) owner[key] = SyntheticScene::kHitGround;
+  for (size_t k = 0; k < surfaces.size(); ++k)
+    for (uint64_t key : surfaces[k]) {
+      const auto [it, inserted] = owner.emplace(key, static_cast<int>(k));
+      if (!inserted && it->second != static_cast<int>(k)) it->second = kSharedCell;
+    }
+  ObstacleZones result;
+  result.resolution_m = resolution_m;
+  result.zones.resize(surfaces.size());
+  for (size_t k = 0; k < surfaces.size(); ++k) {
+    std::unordered_set<uint64_t> zone;
+    for (uint64_t key : surfaces[k]) {
+      const Eigen::Vector3i g = unpackCell(key);
+      for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const uint64_t n = packCell(g + Eigen::Vector3i(dx, dy, dz));
+            const auto it = owner.find(n);
+            if (it == owner.end() || it->second == static_cast<int>(k)) zone.insert(n);
+          }
+    }
+    result.zones[k].assign(zone.begin(), zone.end());
+    std::sort(result.zones[k].begin(), result.zones[k].end());  // the same order on every run
+  }
+  return result;
+}
+
+DetectionTracker::DetectionTracker(const ObstacleZones& zones, const SyntheticScene& scene)
+    : zones_(zones), scene_(scene), detections_(zones.zones.size()) {
+  for (size_t k = 0; k < zones.zones.size(); ++k)
+    if (!zones.zones[k].empty()) pending_.push_back(k);
+}
+
+void DetectionTracker::update(const octomap::OcTree& map, long frame, const Eigen::Vector3d& W_camera) {
+  const auto shows = [&](size_t k) {
+    for (uint64_t key : zones_.zones[k]) {
+      const octomap::OcTreeNode* n = nodeAt(map, unpackCell(key));
+      if (n && map.isNodeOccupied(n)) return true;
+    }
+    return false;
+  };
+  for (auto it = pending_.begin(); it != pending_.end();) {
+    if (!shows(*it)) {
+      ++it;
+      continue;
+    }
+    detections_[*it] = Detection{frame, scene_.boxes[*it].exteriorDistance(W_camera)};
+    it = pending_.erase(it);
+  }
+}
+
+DetectionSummary summarizeDetections(const ObstacleZones& zones, const std::vector<Detection>& mine,
+                                     const std::vector<Detection>* reference, long frame_tolerance) {
+  DetectionSummary s;
+  std::vector<double> distances;
+  for (size_t k = 0; k < zones.zones.size(); ++k) {
+    if (zones.zones[k].empty()) continue;
+    ++s.observed;
+    const Detection& m = mine[k];
+    if (m.detected()) distances.push_back(m.distance_m);
+    if (!reference) continue;
+    const Detection& r = (*reference)[k];
+    s.later_than_reference += r.detected() && (!m.detected() || m.frame > r.frame + frame_tolerance);
+    s.earlier_than_reference += m.detected() && (!r.detected() || r.frame > m.frame + frame_tolerance);
+  }
+  s.detected = distances.size();
+  if (!distances.empty()) {
+    std::sort(distances.begin(), distances.end());
+    s.median_distance_m = distances[distances.size() / 2];
+    s.min_distance_m = distances.front();
+  }
+  return s;
 }
 
 std::unordered_set<uint64_t> surfaceCells(const std::vector<Eigen::Vector3d>& W_points, double resolution_m) {

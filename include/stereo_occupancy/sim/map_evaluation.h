@@ -100,6 +100,68 @@ size_t countCalledFree(const LocalGrid& grid, const std::vector<Eigen::Vector3i>
 MapQuality evaluateMap(const octomap::OcTree& map, const SyntheticScene& scene, const ObservedGroundTruth& truth,
                        const RangeBand& band = RangeBand());
 
+/// Where each obstacle of a flight (each box of its scene; the ground is
+/// none) shows in a map: its zone is the cells holding its surface points
+/// that the flight's exact images saw within range, and their 26 neighbours
+/// (the recall's one-cell tolerance), less every cell holding a surface
+/// point of another box or of the ground (so that the ground at a post's
+/// foot or a post at a wire's end does not count for it).
+struct ObstacleZones {
+  double resolution_m = 0.0;
+  std::vector<std::vector<uint64_t>> zones;  ///< per box: packCell keys; empty if the flight never saw it in range
+  /// Boxes with a non-empty zone.
+  size_t observedCount() const;
+};
+
+/// The zones of @p scenario's boxes from every @p pixel_step-th pixel (in x
+/// and y) of every @p frame_step-th frame.
+ObstacleZones observeObstacles(const FlightScenario& scenario, double resolution_m, double max_range_m,
+                               int frame_step = 1, int pixel_step = 1);
+
+/// When an obstacle first showed in a map fused frame by frame.
+struct Detection {
+  long frame = -1;          ///< the frame after whose fusion it first showed; -1: never
+  double distance_m = std::numeric_limits<double>::quiet_NaN();  ///< camera centre to the box then [m]
+  bool detected() const { return frame >= 0; }
+};
+
+/// Follows a map as frames are fused into it and records, per observed
+/// obstacle, the first frame after which an occupied cell lies in its zone
+/// (checking only the obstacles not yet detected), and the distance from the
+/// camera centre to the obstacle's box at that frame: how far ahead a
+/// planner sees it. Keeps references to the zones and the scene.
+class DetectionTracker {
+ public:
+  DetectionTracker(const ObstacleZones& zones, const SyntheticScene& scene);
+  /// Call after fusing frame @p frame, taken from W_camera, into @p map.
+  void update(const octomap::OcTree& map, long frame, const Eigen::Vector3d& W_camera);
+  /// Per box; never detected for a box with an empty zone.
+  const std::vector<Detection>& detections() const { return detections_; }
+
+ private:
+  const ObstacleZones& zones_;
+  const SyntheticScene& scene_;
+  std::vector<Detection> detections_;
+  std::vector<size_t> pending_;  ///< observed boxes not detected yet
+};
+
+/// A method's detections summed up, against a reference's (OctoMap's).
+struct DetectionSummary {
+  size_t observed = 0;   ///< obstacles with a zone
+  size_t detected = 0;   ///< ... that showed in the map
+  double median_distance_m = std::numeric_limits<double>::quiet_NaN();  ///< over the detected ones
+  double min_distance_m = std::numeric_limits<double>::quiet_NaN();
+  /// Obstacles the reference detected and this method more than
+  /// frame_tolerance frames later or never; and the other way round.
+  size_t later_than_reference = 0;
+  size_t earlier_than_reference = 0;
+};
+
+/// Sums up @p mine over the boxes with a zone in @p zones, comparing each
+/// with @p reference's detection of the same box (none: no comparison).
+DetectionSummary summarizeDetections(const ObstacleZones& zones, const std::vector<Detection>& mine,
+                                     const std::vector<Detection>* reference, long frame_tolerance = 1);
+
 /// The cells (packCell keys) holding @p W_points at cells of @p resolution_m.
 std::unordered_set<uint64_t> surfaceCells(const std::vector<Eigen::Vector3d>& W_points, double resolution_m);
 
