@@ -4,7 +4,9 @@
 // camera_info, and /tf with map -> base_link -> camera_optical (REP-103/105).
 // The ground truth goes beside it: the scene on /ground_truth/scene and in
 // <bag>.scene.txt, and with --true-depth each frame's exact depth on
-// /ground_truth/depth. No roscore needed.
+// /ground_truth/depth. With --matcher sgbm the disparities come from
+// StereoSGBM on rendered left and right images (a real matcher's errors)
+// instead of exact disparities with Gaussian noise. No roscore needed.
 
 #include <rosbag/bag.h>
 #include <sensor_msgs/CameraInfo.h>
@@ -31,7 +33,11 @@ namespace {
 int usage(int code) {
   std::cerr << "usage: simulate_flight --scenario posts|houses|forest|wires|posts_far|forest_far|mission\n"
                "                       --output FILE.bag [--seed N] [--frames N | --duration-s S] [--true-depth]\n"
+               "                       [--matcher gaussian|sgbm]\n"
                "  mission        a 30-minute, 7 km flight with scenery generated along its path\n"
+               "  --matcher      gaussian (default): exact disparities with Gaussian noise (the paper's figures);\n"
+               "                 sgbm: textured left and right images matched by StereoSGBM with stereo_image_proc's\n"
+               "                 defaults (64 disparities, 15 px block)\n"
                "  --duration-s   the first S seconds of the flight (as --frames S x its frame rate)\n"
                "  --true-depth   also write each frame's exact depth (32FC1, m; inf: sky) on /ground_truth/depth\n";
   return code;
@@ -43,6 +49,7 @@ int run(int argc, char** argv) {
   long frames = -1;
   double duration_s = -1.0;
   bool true_depth = false;
+  so::StereoMatcher matcher = so::StereoMatcher::kGaussian;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--scenario") scenario_name = tools::nextValue(argc, argv, &i);
@@ -53,12 +60,17 @@ int run(int argc, char** argv) {
       duration_s = tools::parseNumber(a, tools::nextValue(argc, argv, &i));
       if (!(duration_s > 0.0)) throw tools::UsageError("--duration-s expects a positive number of seconds");
     } else if (a == "--true-depth") true_depth = true;
+    else if (a == "--matcher") {
+      if (!so::parseStereoMatcher(tools::nextValue(argc, argv, &i), &matcher))
+        throw tools::UsageError("--matcher must be gaussian or sgbm");
+    }
     else if (a == "--help") return usage(0);
     else throw tools::UsageError("unknown option '" + a + "'");
   }
   if (scenario_name.empty() || output.empty()) throw tools::UsageError("--scenario and --output are required");
   if (frames > 0 && duration_s > 0.0) throw tools::UsageError("--frames and --duration-s exclude each other");
   so::FlightScenario s = tools::scenarioNamed(scenario_name);
+  so::useMatcher(&s, matcher);
   if (duration_s > 0.0) frames = std::max(1L, std::lround(duration_s * s.frame_rate_hz));
   const size_t n = frames > 0 ? std::min<size_t>(frames, s.T_W_B.size()) : s.T_W_B.size();
   rosbag::Bag bag(output, rosbag::bagmode::Write);
@@ -66,7 +78,9 @@ int run(int argc, char** argv) {
   const ros::Time start(1700000000.0);
   so::tools::ProgressBar progress(n, "frames");
   std_msgs::String scene;
-  scene.data = "scenario " + s.name + " seed " + std::to_string(seed) + "\n" + so::describeScene(s.scene);
+  scene.data = "scenario " + s.name + " seed " + std::to_string(seed) + " matcher " + so::toString(matcher) +
+               (matcher == so::StereoMatcher::kSgbm ? " (" + s.sgbm.describe() + ")" : std::string()) + "\n" +
+               so::describeScene(s.scene);
   bag.write("/ground_truth/scene", start, scene);
   std::ofstream scene_file(output + ".scene.txt");
   scene_file << scene.data;
@@ -115,7 +129,8 @@ int run(int argc, char** argv) {
   }
   bag.close();
   progress.finish();
-  std::cerr << "simulate_flight: " << s.name << ", " << n << " frames at " << s.frame_rate_hz << " Hz -> "
+  std::cerr << "simulate_flight: " << s.name << " (" << so::toString(matcher) << "), " << n << " frames at "
+            << s.frame_rate_hz << " Hz -> "
             << output << std::endl;
   return 0;
 }
