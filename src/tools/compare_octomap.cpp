@@ -165,7 +165,7 @@ int run(int argc, char** argv) {
   const double max_range = scenario.camera.max_range_m;
   const so::StereoCameraModel camera(scenario.camera);
 
-  const std::string matcher_text = matcher == so::StereoMatcher::kSgbm
+  const std::string matcher_text = scenario.matcher == so::StereoMatcher::kSgbm
                                        ? "matcher sgbm: " + scenario.sgbm.describe()
                                        : std::string("matcher gaussian: exact disparities with Gaussian noise");
   std::cout << "Scenario '" << scenario_name << "' (seed " << seed << ", " << matcher_text << "): " << images.size()

@@ -78,8 +78,8 @@ int run(int argc, char** argv) {
   const ros::Time start(1700000000.0);
   so::tools::ProgressBar progress(n, "frames");
   std_msgs::String scene;
-  scene.data = "scenario " + s.name + " seed " + std::to_string(seed) + " matcher " + so::toString(matcher) +
-               (matcher == so::StereoMatcher::kSgbm ? " (" + s.sgbm.describe() + ")" : std::string()) + "\n" +
+  scene.data = "scenario " + s.name + " seed " + std::to_string(seed) + " matcher " + so::toString(s.matcher) +
+               (s.matcher == so::StereoMatcher::kSgbm ? " (" + s.sgbm.describe() + ")" : std::string()) + "\n" +
                so::describeScene(s.scene);
   bag.write("/ground_truth/scene", start, scene);
   std::ofstream scene_file(output + ".scene.txt");
@@ -129,7 +129,7 @@ int run(int argc, char** argv) {
   }
   bag.close();
   progress.finish();
-  std::cerr << "simulate_flight: " << s.name << " (" << so::toString(matcher) << "), " << n << " frames at "
+  std::cerr << "simulate_flight: " << s.name << " (" << so::toString(s.matcher) << "), " << n << " frames at "
             << s.frame_rate_hz << " Hz -> "
             << output << std::endl;
   return 0;
