@@ -121,6 +121,49 @@ TEST(OfflineTools, RealStereoPairDefaultAgainstOctomapInEachBand) {
   EXPECT_EQ(rows, 12);
 }
 
+// A flight through the real matcher: simulate_flight renders the left and
+// right images and matches them with StereoSGBM (stereo_image_proc's
+// defaults), bag_to_map maps its disparities, and the map holds the posts
+// within one cell (measured: precision 96 %, recall 94 % after 20 frames),
+// a map other than the Gaussian flight's. compare_octomap scores the same
+// flight with the detection range: the mapper's default shows both posts of
+// the first gate, no later than OctoMap.
+TEST(OfflineTools, SgbmFlightThroughTheTools) {
+  const std::string dir = ::testing::TempDir();
+  std::map<std::string, std::string> scores;  // per matcher: evaluate_map's JSON
+  for (const std::string matcher : {"sgbm", "gaussian"}) {
+    const std::string bag = dir + "offline_" + matcher + ".bag";
+    ASSERT_EQ(run(std::string(SIMULATE_FLIGHT_EXE) + " --scenario posts_far --matcher " + matcher +
+                  " --frames 20 --output " + bag).status, 0);
+    const Result mapped = run(std::string(BAG_TO_MAP_EXE) + " --bag " + bag + " --output " + dir + "offline_" + matcher);
+    ASSERT_EQ(mapped.status, 0) << mapped.out;
+    EXPECT_EQ(jsonNumber(mapped.out, "mapped"), 20);
+    const Result score = run(std::string(EVALUATE_MAP_EXE) + " --map " + dir + "offline_" + matcher +
+                             ".bt --scenario posts_far --frames 20");
+    ASSERT_EQ(score.status, 0) << score.out;
+    scores[matcher] = score.out;
+  }
+  EXPECT_GT(jsonNumber(scores["sgbm"], "occupied_precision"), 0.9) << scores["sgbm"];
+  EXPECT_GT(jsonNumber(scores["sgbm"], "occupied_recall"), 0.9) << scores["sgbm"];
+  EXPECT_NE(jsonNumber(scores["sgbm"], "occupied_cells"), jsonNumber(scores["gaussian"], "occupied_cells"));
+
+  const Result r = run(std::string(COMPARE_OCTOMAP_EXE) +
+                       " --scenario posts_far --matcher sgbm --frame-step 50 --resolution 1.0 --algorithm line_pyramid_bounded");
+  ASSERT_EQ(r.status, 0);
+  EXPECT_NE(r.out.find("matcher sgbm: StereoSGBM: 64 disparities"), std::string::npos) << r.out;
+  const auto section = r.out.find("Detection range:");
+  ASSERT_NE(section, std::string::npos) << r.out;
+  // cell, method, detected ("N of M"), median m, min m, later than OctoMap, earlier than OctoMap
+  const std::vector<std::string> ours = tableRow(r.out.substr(section), "1 m", "line_pyramid_bounded, surface");
+  const std::vector<std::string> octomap = tableRow(r.out.substr(section), "1 m", "OctoMap insertPointCloud");
+  ASSERT_EQ(ours.size(), 7u) << r.out;
+  ASSERT_EQ(octomap.size(), 7u) << r.out;
+  EXPECT_EQ(ours[2], "2 of 2");
+  EXPECT_EQ(octomap[2], "2 of 2");
+  EXPECT_GT(std::strtod(ours[4].c_str(), nullptr), 15.0);  // nearest first sighting [m]
+  EXPECT_EQ(ours[5], "0");
+}
+
 // The figures are pictures of something: the paper's sizes, and drawn in
 // more than one colour over much of the canvas.
 TEST(OfflineTools, FiguresAreWritten) {

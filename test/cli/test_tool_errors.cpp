@@ -80,7 +80,8 @@ TEST(ToolErrors, SimulateFlight) {
   expectError("simulate_flight",
               {tool, tool + " --scenario mars --output " + kTmp + "x.bag",
                tool + " --scenario posts --output " + kTmp + "x.bag --frames -3",
-               tool + " --scenario posts --output " + kTmp + "x.bag --seed 1.5", tool + " --scenario posts --output"},
+               tool + " --scenario posts --output " + kTmp + "x.bag --seed 1.5", tool + " --scenario posts --output",
+               tool + " --scenario posts --output " + kTmp + "x.bag --matcher census"},
               2);
   expectError("simulate_flight", {tool + " --scenario posts --frames 1 --output /nonexistent/dir/x.bag"}, 1);
 }
@@ -90,12 +91,13 @@ TEST(ToolErrors, BenchmarksAndFigures) {
   expectError("compare_octomap",
               {compare + " --scenario mars", compare + " --frame-step x", compare + " --frame-step 0",
                compare + " --resolution 0", compare + " --resolution nan", compare + " --truth-pixel-step",
-               compare + " --model p_hot=0.7 --frame-step 100", compare + " --map clamping_min_prob=0.7 --frame-step 100"},
+               compare + " --model p_hot=0.7 --frame-step 100", compare + " --map clamping_min_prob=0.7 --frame-step 100",
+               compare + " --matcher census", compare + " --matcher"},
               2);
   const std::string pair = EVALUATE_STEREO_PAIR_EXE;
   expectError("evaluate_stereo_pair",
               {pair + " --shrink 0", pair + " --resolution 0", pair + " --model p_hot=0.7", pair + " --frobnicate",
-               pair + " --algorithm bresenham"},
+               pair + " --algorithm bresenham", pair + " --sgbm census"},
               2);
   expectError("evaluate_stereo_pair", {pair + " --left /nonexistent.png"}, 1);
   expectError("table1", {table1 + " --repeat 0", table1 + " --repeat x", table1 + " --frobnicate"}, 2);
