@@ -25,8 +25,8 @@ export DEBIAN_FRONTEND=noninteractive
 # --- Host packages (amd64): the cross compiler and qemu ----------------------
 HOST_PACKAGES=(g++-aarch64-linux-gnu qemu-user cmake)
 # --- Target packages (arm64), unpacked into the sysroot -------------------------
-ARM64_PACKAGES=(libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev liboctomap-dev libgtest-dev
-  libeigen3-dev)
+ARM64_PACKAGES=(libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev libopencv-calib3d-dev liboctomap-dev
+  libgtest-dev libeigen3-dev)
 
 missing=()
 for p in "${HOST_PACKAGES[@]}"; do

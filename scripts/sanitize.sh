@@ -12,7 +12,7 @@ flags=(-std=c++17 -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined -f
 printf '%s\n' "$repo"/src/core/*.cpp "$repo"/src/sim/*.cpp "$repo"/test/core/*.cpp "$repo"/test/sim/*.cpp \
   "$repo"/test/gtest_main.cpp |
   xargs -P "$(nproc)" -I{} sh -c 'g++ "$@" -c "{}" -o "'"$out"'/obj/$(basename {} .cpp).o"' _ "${flags[@]}"
-g++ "${flags[@]}" "$out"/obj/*.o -lgtest -lpthread -lopencv_core -lopencv_imgproc -lopencv_imgcodecs \
+g++ "${flags[@]}" "$out"/obj/*.o -lgtest -lpthread -lopencv_core -lopencv_imgproc -lopencv_imgcodecs -lopencv_calib3d \
   -loctomap -loctomath -o "$out/core_test_sanitized"
 xml=()
 [ -n "${RESULTS:-}" ] && mkdir -p "$RESULTS" && xml=(--gtest_output="xml:$RESULTS/sanitized-core.xml")
