@@ -121,8 +121,9 @@ Face faceAt(const SyntheticScene& scene, int object, const Eigen::Vector3d& W_po
   return face;
 }
 
-/// Texture in about [-1, 1] (standard deviation 1 at full detail) of a face
-/// at (u, v) [m], its octaves finer than the footprint faded out.
+/// Texture of mean 0 and standard deviation 1 at full detail (less where
+/// octaves fade) of a face at (u, v) [m], its octaves finer than the
+/// footprint faded out.
 double texture(uint32_t face_id, double u_m, double v_m, double footprint_m) {
   double sum = 0.0;
   double wavelength = kFinestTextureWavelengthM;

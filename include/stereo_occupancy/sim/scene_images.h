@@ -33,10 +33,10 @@ PixelHits castPixelRays(const SyntheticScene& scene, const StereoCameraModel& ca
 struct ImageAppearance {
   double sky_grey = 205.0;               ///< the sky: uniform, as a clear sky is to a matcher
   double ground_albedo_grey = 110.0;     ///< the ground's mean before shading
-  double ground_contrast = 0.35;         ///< its texture's amplitude, relative to its mean
+  double ground_contrast = 0.35;         ///< its texture's standard deviation at full detail, relative to its mean
   double min_object_albedo_grey = 70.0;  ///< each box's mean lies in [min, min + span), hashed from its index
   double object_albedo_span_grey = 100.0;
-  double min_object_contrast = 0.15;     ///< each box's texture amplitude lies in [min, min + span)
+  double min_object_contrast = 0.15;     ///< each box's texture contrast (as the ground's) lies in [min, min + span)
   double object_contrast_span = 0.3;
   double textureless_albedo_grey = 225.0;  ///< boxes marked texture-less: uniform white walls
   double sensor_noise_grey = 1.0;        ///< Gaussian noise of each pixel, independent between the cameras
