@@ -35,6 +35,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "mono_image.h"
 #include "stereo_occupancy/GetOctomap.h"
 #include "stereo_occupancy/OccupancyUpdate.h"
 #include "stereo_occupancy/ros/conversions.h"
@@ -208,18 +209,6 @@ std::vector<Frame> readFrames(const std::string& set) {
 
 // ---------------------------------------------------------------- messages
 
-sensor_msgs::ImagePtr monoMsg(const cv::Mat& gray, const std_msgs::Header& header) {
-  auto msg = boost::make_shared<sensor_msgs::Image>();
-  msg->header = header;
-  msg->width = gray.cols;
-  msg->height = gray.rows;
-  msg->encoding = sensor_msgs::image_encodings::MONO8;
-  msg->step = gray.cols;
-  msg->data.resize(gray.total());
-  for (int y = 0; y < gray.rows; ++y)
-    std::memcpy(&msg->data[static_cast<size_t>(y) * gray.cols], gray.ptr(y), gray.cols);
-  return msg;
-}
 
 /// A calibrated camera's camera_info: the raw camera (K, D) and its
 /// rectification (R, P) as cv::stereoRectify gives them.

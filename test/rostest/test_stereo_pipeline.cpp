@@ -20,6 +20,7 @@
 #include <memory>
 #include <string>
 
+#include "mono_image.h"
 #include "stereo_occupancy/GetOctomap.h"
 #include "stereo_occupancy/ros/conversions.h"
 
@@ -33,17 +34,6 @@ constexpr double kFocalFullPx = 3740.0;         // Middlebury 2006 at full size
 constexpr double kBaselineM = 0.16;
 constexpr double kFocalPx = kFocalFullPx / kShrink;
 
-sensor_msgs::ImagePtr monoMsg(const cv::Mat& gray, const std_msgs::Header& header) {
-  auto msg = boost::make_shared<sensor_msgs::Image>();
-  msg->header = header;
-  msg->width = gray.cols;
-  msg->height = gray.rows;
-  msg->encoding = sensor_msgs::image_encodings::MONO8;
-  msg->step = gray.cols;
-  msg->data.resize(gray.total());
-  for (int y = 0; y < gray.rows; ++y) std::memcpy(&msg->data[static_cast<size_t>(y) * gray.cols], gray.ptr(y), gray.cols);
-  return msg;
-}
 
 /// A rectified camera: no distortion, identity rectification; the right one
 /// shifted by the baseline (P[3] = -f b).
