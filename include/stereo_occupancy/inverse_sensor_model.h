@@ -71,9 +71,10 @@ struct InverseSensorModelConfig {
   /// measured cell it is free space (p_free). A noise hit in front of a
   /// surface lies in the gaps of later views of that surface and was never
   /// cleared (docs/quality.md). 0 (default): off, the whole gap says
-  /// nothing. Not yet safe with kLinePyramidBounded, whose bound lets a
-  /// block's far line cover a nearer obstacle with its gap: the guard
-  /// frees it (docs/quality.md).
+  /// nothing. Off while it is not measured on the flights: with one hit per
+  /// block, kLinePyramidBounded's far line covered a nearer obstacle with
+  /// its gap and the guard freed it; every pixel's hit now keeps that post
+  /// (docs/quality.md).
   int gap_guard_cells = 0;
 
   /// The parameters (parameter_table.h): f(spec, member) for each.
