@@ -279,6 +279,22 @@ DetectionSummary summarizeDetections(const ObstacleZones& zones, const std::vect
   return s;
 }
 
+octomap::Pointcloud worldPointCloud(const cv::Mat& disparity, const StereoCameraModel& camera,
+                                    const Eigen::Isometry3d& T_W_C) {
+  CV_Assert(disparity.type() == CV_32FC1);
+  octomap::Pointcloud cloud;
+  for (int y = 0; y < disparity.rows; ++y) {
+    const float* row = disparity.ptr<float>(y);
+    for (int x = 0; x < disparity.cols; ++x) {
+      const float d = row[x];
+      if (!(d > 0.0f) || !camera.isValidDisparity(d)) continue;
+      const Eigen::Vector3d W_p = T_W_C * camera.pointFromDisparity(x, y, d);
+      cloud.push_back(static_cast<float>(W_p.x()), static_cast<float>(W_p.y()), static_cast<float>(W_p.z()));
+    }
+  }
+  return cloud;
+}
+
 std::unordered_set<uint64_t> surfaceCells(const std::vector<Eigen::Vector3d>& W_points, double resolution_m) {
   std::unordered_set<uint64_t> cells;
   for (const Eigen::Vector3d& p : W_points) cells.insert(packCell(LocalGrid::globalIndex(p, resolution_m)));

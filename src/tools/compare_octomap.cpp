@@ -293,15 +293,7 @@ int run(int argc, char** argv) {
       so::DetectionTracker tracker(zones, scenario.scene);
       for (size_t i = 0; i < images.size(); ++i) {
         const auto t0 = Clock::now();
-        octomap::Pointcloud cloud;  // the valid pixels' points, in the world frame (octomap_server's input)
-        const cv::Mat& d = images[i];
-        for (int y = 0; y < d.rows; ++y)
-          for (int x = 0; x < d.cols; ++x) {
-            const float v = d.at<float>(y, x);
-            if (!(v > 0.0f) || !camera.isValidDisparity(v)) continue;
-            const Eigen::Vector3d p = poses[i] * camera.pointFromDisparity(x, y, v);
-            cloud.push_back(static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()));
-          }
+        const octomap::Pointcloud cloud = so::worldPointCloud(images[i], camera, poses[i]);
         const Eigen::Vector3d o = poses[i].translation();
         const auto t1 = Clock::now();
         tree.insertPointCloud(cloud, octomap::point3d(o.x(), o.y(), o.z()), max_range, /*lazy_eval=*/false,

@@ -249,16 +249,9 @@ int run(int argc, char** argv) {
     if (algorithm != so::DrawingAlgorithm::kLine) mapper(so::DrawingAlgorithm::kLine);  // one line per pixel
 
     octomap::OcTree octree(res);  // octomap_server's insertion of the same disparity's points
-    octomap::Pointcloud cloud;
-    for (int y = 0; y < size.height; ++y)
-      for (int x = 0; x < size.width; ++x) {
-        const float d = disparity.at<float>(y, x);
-        if (!(d > 0.0f) || !camera.isValidDisparity(d)) continue;
-        const Eigen::Vector3d p = T_W_C * camera.pointFromDisparity(x, y, d);
-        cloud.push_back(static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()));
-      }
     const Eigen::Vector3d o = T_W_C.translation();
-    octree.insertPointCloud(cloud, octomap::point3d(o.x(), o.y(), o.z()), max_range_m);
+    octree.insertPointCloud(so::worldPointCloud(disparity, camera, T_W_C), octomap::point3d(o.x(), o.y(), o.z()),
+                            max_range_m);
     report("OctoMap insertPointCloud", octree);
   }
   return 0;

@@ -40,6 +40,7 @@
 #include "stereo_occupancy/OccupancyUpdate.h"
 #include "stereo_occupancy/ros/conversions.h"
 #include "stereo_occupancy/ros/parameters.h"
+#include "stereo_occupancy/sim/map_evaluation.h"
 #include "wait_for.h"
 
 using namespace stereo_occupancy;
@@ -314,16 +315,9 @@ void insertAsOctomap(const stereo_msgs::DisparityImage& msg, const StereoCameraM
                      const Eigen::Isometry3d& T_W_C, octomap::OcTree* tree) {
   const cv::Mat disparity(msg.image.height, msg.image.width, CV_32FC1, const_cast<uint8_t*>(msg.image.data.data()),
                           msg.image.step);
-  octomap::Pointcloud cloud;
-  for (int y = 0; y < disparity.rows; ++y)
-    for (int x = 0; x < disparity.cols; ++x) {
-      const float d = disparity.at<float>(y, x);
-      if (!(d > 0.0f) || !camera.isValidDisparity(d)) continue;
-      const Eigen::Vector3d W_p = T_W_C * camera.pointFromDisparity(x, y, d);
-      cloud.push_back(static_cast<float>(W_p.x()), static_cast<float>(W_p.y()), static_cast<float>(W_p.z()));
-    }
   const Eigen::Vector3d o = T_W_C.translation();
-  tree->insertPointCloud(cloud, octomap::point3d(o.x(), o.y(), o.z()), camera.config().max_range_m);
+  tree->insertPointCloud(worldPointCloud(disparity, camera, T_W_C), octomap::point3d(o.x(), o.y(), o.z()),
+                         camera.config().max_range_m);
 }
 
 /// Of the cells in @p seen_by that more than half of @p later_frames see

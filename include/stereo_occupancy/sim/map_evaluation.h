@@ -165,6 +165,13 @@ DetectionSummary summarizeDetections(const ObstacleZones& zones, const std::vect
 /// The cells (packCell keys) holding @p W_points at cells of @p resolution_m.
 std::unordered_set<uint64_t> surfaceCells(const std::vector<Eigen::Vector3d>& W_points, double resolution_m);
 
+/// octomap_server's input from one disparity image (CV_32FC1) of @p camera
+/// at T_W_C: the point of each pixel with a valid disparity above zero, in
+/// the world frame (zero, the sky, has no point). What the comparisons with
+/// OctoMap's insertPointCloud insert.
+octomap::Pointcloud worldPointCloud(const cv::Mat& disparity, const StereoCameraModel& camera,
+                                    const Eigen::Isometry3d& T_W_C);
+
 /// Scores @p map against true surface cells alone (a real scene: no solids,
 /// so no phantom count): an occupied cell is precise within one cell of a
 /// surface cell; only the occupied cells whose centre @p counted accepts
