@@ -121,6 +121,14 @@ class OctomapServerTest : public ::testing::Test {
     ASSERT_TRUE(waitFor(mutex_, [&] { return holdsTheWall(latest_map_); }, 20.0)) << "the wall never reached the map";
   }
 
+  /// Saves through @p service (the save directory made first); fails the test if it does not.
+  void saveTheMap(const std::string& service = "/octomap_accumulator/save_map") {
+    ::mkdir("/tmp/stereo_occupancy_octomap_server", 0755);
+    std_srvs::Trigger save;
+    ASSERT_TRUE(ros::service::call(service, save)) << service;
+    ASSERT_TRUE(save.response.success) << save.response.message;
+  }
+
   /// The map as the octomap_binary or octomap_full service gives it.
   std::unique_ptr<octomap::OcTree> requestMap(const std::string& service, bool* binary = nullptr) {
     GetOctomap get;
@@ -346,10 +354,7 @@ TEST_F(OctomapServerTest, MarkersCarryOnlyTheChangedBlocks) {
 // publishes it before any update comes.
 TEST_F(OctomapServerTest, AnAccumulatorStartsFromASavedMap) {
   mapTheWall();
-  ::mkdir("/tmp/stereo_occupancy_octomap_server", 0755);
-  std_srvs::Trigger save;
-  ASSERT_TRUE(ros::service::call("/octomap_accumulator/save_map", save));
-  ASSERT_TRUE(save.response.success) << save.response.message;
+  ASSERT_NO_FATAL_FAILURE(saveTheMap());
   nh_.setParam("/restored/full_map_period_s", 0.0);
   nh_.setParam("/restored/map_file", "/tmp/stereo_occupancy_octomap_server/stereo_occupancy_map.ot");
   OctomapConstPtr restored;
@@ -430,10 +435,7 @@ TEST_F(OctomapServerTest, ARestartedAccumulatorContinuesFromItsDatabase) {
 // other order too; a latched topic then holds it for the next subscriber.
 TEST_F(OctomapServerTest, ALateSubscriberGetsTheWholeMapInEitherOrder) {
   mapTheWall();
-  ::mkdir("/tmp/stereo_occupancy_octomap_server", 0755);
-  std_srvs::Trigger save;
-  ASSERT_TRUE(ros::service::call("/octomap_accumulator/save_map", save));
-  ASSERT_TRUE(save.response.success) << save.response.message;
+  ASSERT_NO_FATAL_FAILURE(saveTheMap());
   for (const bool rviz_first : {true, false}) {
     const std::string name = rviz_first ? "/hover_rviz_first" : "/hover_planner_first";
     nh_.setParam(name + "/full_map_period_s", 0.5);
@@ -499,10 +501,7 @@ TEST_F(OctomapServerTest, ALateSubscriberGetsTheWholeMapInEitherOrder) {
 TEST_F(OctomapServerTest, ASaveWithoutItsDatabaseKeepsTheMissionsFiles) {
   mapTheWall();
   const std::string dir = "/tmp/stereo_occupancy_octomap_server";
-  ::mkdir(dir.c_str(), 0755);
-  std_srvs::Trigger save;
-  ASSERT_TRUE(ros::service::call("/octomap_accumulator/save_map", save));
-  ASSERT_TRUE(save.response.success) << save.response.message;
+  ASSERT_NO_FATAL_FAILURE(saveTheMap());
   const auto bytes = [](const std::string& path) {
     std::ifstream in(path, std::ios::binary);
     return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
