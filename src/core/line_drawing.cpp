@@ -346,18 +346,22 @@ class PixelHitRows {
   /// Beyond this margin the float keys are not worth it: all in double.
   static constexpr float kMaxMarginCells = 0.125f;
 
-  /// What keyChunk() found for one pixel's range.
-  enum Range : int32_t {
-    kNoHit = 0,    ///< not measured, or beyond the maximum range
-    kInRange = 1,  ///< within it
-    kNearMax = 2,  ///< too near the maximum range to tell in float: drawHitAtDepth()
+  /// What keyChunk() found for one pixel: how to draw its hit.
+  enum Draw : int32_t {
+    kSkip = 0,     ///< not measured, or beyond the maximum range
+    kKeyed = 1,    ///< in the grid's cell index[k], whose block is block[k]
+    kRekey = 2,    ///< near a cell face: its unsure axes again in double
+    kExact = 3,    ///< too near the maximum range to tell in float: drawHitAtDepth()
+    kOutside = 4,  ///< in range, surely outside the grid
   };
 
   /// The keys of up to kChunk pixels.
   struct Keys {
-    int32_t range[kChunk];    ///< Range
+    int32_t draw[kChunk];     ///< Draw
     int32_t unsure[kChunk];   ///< bit i: near a cell face across axis i (cell[i] is only a guess)
     int32_t cell[3][kChunk];  ///< the cell along each axis from the grid's first (floor(q) where sure)
+    uint32_t index[kChunk];   ///< kKeyed: the cell's index in the grid
+    uint32_t block[kChunk];   ///< kKeyed: its block, as LocalGrid::numBlocks() numbers them
   };
 
   template <class Grid>
@@ -380,7 +384,11 @@ class PixelHitRows {
       largest = std::max(largest, std::abs(g.g0[i]) + z_cap * g.inv_c * span);
     }
     margin_cells_ = std::max(kMinMarginCells, static_cast<float>(largest * kRelativeMargin));
-    in_float_ = margin_cells_ <= kMaxMarginCells && largest < double{1 << 30};
+    // Indices in 32 bits (unsigned: a pixel outside the grid wraps, harmlessly).
+    const double cells = static_cast<double>(g.size[0]) * g.size[1] * g.size[2];
+    in_float_ = margin_cells_ <= kMaxMarginCells && largest < double{1 << 30} && cells < double{1u << 31};
+    for (int i = 0; i < 3; ++i) size_[i] = static_cast<uint32_t>(g.size[i]);
+    blocks_per_row_ = static_cast<uint32_t>(g.blocks_per_row);
     z_cap_ = static_cast<float>(z_cap);
     cx_ = static_cast<float>(cfg.cx_px);
     cy_ = static_cast<float>(cfg.cy_px);
@@ -400,7 +408,7 @@ class PixelHitRows {
     max_d_ = valid.max_px;
   }
 
-  /// False: each pixel keyed in double (a huge grid or range).
+  /// False: each pixel keyed in double (a huge grid or range, or 2^31 cells).
   bool keysInFloat() const { return in_float_; }
 
   /// True if d is a valid disparity that measures a range (isValidDisparity(), measuresRange()).
@@ -425,6 +433,7 @@ class PixelHitRows {
     const float a0 = at_00_[0] + yf * per_y_[0], a1 = at_00_[1] + yf * per_y_[1], a2 = at_00_[2] + yf * per_y_[2];
     const float s0 = per_x_[0], s1 = per_x_[1], s2 = per_x_[2];
     const float o0 = origin_[0], o1 = origin_[1], o2 = origin_[2];
+    const uint32_t size0 = size_[0], size1 = size_[1], size2 = size_[2], blocks_per_row = blocks_per_row_;
     for (int k = 0; k < n; ++k) {
       const float d = row[x + k];
       const int measured = (d >= min_d) & (d <= max_d);  // 0 for NaN
@@ -432,7 +441,7 @@ class PixelHitRows {
       const float fx = static_cast<float>(x + k);
       const float ray_x = (fx - cx) * inv_f;
       const float r2 = z * z * (ray_x * ray_x + ray_y2_plus_1);
-      keys->range[k] = (measured == 0) | (r2 > r2_out) ? kNoHit : (r2 <= r2_in ? kInRange : kNearMax);
+      const int in_range = measured & (r2 <= r2_out), near_max = r2 > r2_in;
       // The point in cells from the grid's first: g0 + z·(R_W_C·C_ray) / c.
       const float q0 = o0 + z * (a0 + fx * s0), q1 = o1 + z * (a1 + fx * s1), q2 = o2 + z * (a2 + fx * s2);
       // Truncation is floor for q >= 0; below 0, q - c < 0: unsure (outside the grid, or in double).
@@ -445,6 +454,17 @@ class PixelHitRows {
       keys->cell[0][k] = c0;
       keys->cell[1][k] = c1;
       keys->cell[2][k] = c2;
+      const uint32_t u0 = static_cast<uint32_t>(c0), u1 = static_cast<uint32_t>(c1), u2 = static_cast<uint32_t>(c2);
+      const int inside = (u0 < size0) & (u1 < size1) & (u2 < size2);  // a negative cell: huge
+      const uint32_t grid_row = u1 + u2 * size1;
+      keys->index[k] = u0 + grid_row * size0;
+      keys->block[k] = grid_row * blocks_per_row + u0 / kInformationBlock;
+      // !in_range ? kSkip : near_max ? kExact : unsure ? kRekey : inside ? kKeyed : kOutside, without branches
+      const int32_t is_unsure = -static_cast<int32_t>(unsure != 0), is_near = -near_max;  // all ones or 0
+      int32_t draw = kOutside + (kKeyed - kOutside) * inside;
+      draw = (draw & ~is_unsure) | (kRekey & is_unsure);
+      draw = (draw & ~is_near) | (kExact & is_near);
+      keys->draw[k] = draw & -in_range;
     }
   }
 
@@ -455,6 +475,7 @@ class PixelHitRows {
   float z_cap_, cx_, cy_, inv_f_, bf_;
   float r2_in_, r2_out_;
   float min_d_, max_d_;  ///< the disparities measured()
+  uint32_t size_[3], blocks_per_row_;
 };
 
 /// The cursor at the second slab, the first inner one.
@@ -590,20 +611,22 @@ uint64_t LineDrawer::drawPixelHits(const RayGrid& grid, const cv::Mat& disparity
   };
   const uint32_t size[3] = {static_cast<uint32_t>(g.size[0]), static_cast<uint32_t>(g.size[1]),
                             static_cast<uint32_t>(g.size[2])};
-  // Pixel k's keyed cell (its unsure axes again in double, as drawHitAt() keys them).
-  auto drawKeyed = [&](int x, int y, float d, int k) {
+  uint8_t no_blocks = 0;  // where the hits' blocks go when nobody asks for them
+  uint8_t* const hit_blocks = g.hit_blocks ? g.hit_blocks : &no_blocks;
+  const uint32_t block_mask = g.hit_blocks ? ~0u : 0u;
+  // Pixel k's cell with its unsure axes again in double, as drawHitAt() keys them.
+  auto drawRekeyed = [&](int x, int y, float d, int k) {
     uint32_t cell[3] = {static_cast<uint32_t>(keys.cell[0][k]), static_cast<uint32_t>(keys.cell[1][k]),
                         static_cast<uint32_t>(keys.cell[2][k])};  // a negative cell: huge
-    if (const int32_t unsure = keys.unsure[k]) {                  // rare on real images
-      const Eigen::Vector3d C_point = camera_.rayThroughPixel(x, y) * camera_.depthFromDisparity(d);
-      for (int i = 0; i < 3; ++i)
-        if ((unsure >> i) & 1)
-          cell[i] = floorToInt(pointComponent(R_W_C, C_point, g.W_origin, i) * g.inv_c) - g.origin_index[i];
-    }
+    const int32_t unsure = keys.unsure[k];
+    const Eigen::Vector3d C_point = camera_.rayThroughPixel(x, y) * camera_.depthFromDisparity(d);
+    for (int i = 0; i < 3; ++i)
+      if ((unsure >> i) & 1)
+        cell[i] = floorToInt(pointComponent(R_W_C, C_point, g.W_origin, i) * g.inv_c) - g.origin_index[i];
     if (cell[0] >= size[0] || cell[1] >= size[1] || cell[2] >= size[2]) return;  // outside the grid
     ++written;
     const int64_t grid_row = cell[1] + int64_t{cell[2]} * g.size[1];
-    drawCell(g.data, cell[0] + grid_row * g.size[0], hit);  // a neighbour's cell again: cheaper than a branch
+    drawCell(g.data, cell[0] + grid_row * g.size[0], hit);
     if (g.hit_blocks) g.hit_blocks[grid_row * g.blocks_per_row + cell[0] / kInformationBlock] = 1;  // as drawHitAt()
   };
   for (int y = y_begin; y < y_end; ++y) {
@@ -618,12 +641,18 @@ uint64_t LineDrawer::drawPixelHits(const RayGrid& grid, const cv::Mat& disparity
       }
       keying.keyChunk(row, x, n, y, &keys);
       for (int k = 0; k < n; ++k) {
-        if (keys.range[k] == PixelHitRows::kNoHit) continue;
+        const int32_t draw = keys.draw[k];
+        if (draw == PixelHitRows::kSkip) continue;
         ++pixels;
-        if (keys.range[k] == PixelHitRows::kNearMax)
+        if (draw == PixelHitRows::kKeyed) {  // most pixels
+          ++written;
+          drawCell(g.data, keys.index[k], hit);  // a neighbour's cell again: cheaper than a branch
+          hit_blocks[keys.block[k] & block_mask] = 1;
+        } else if (draw == PixelHitRows::kRekey) {
+          drawRekeyed(x + k, y, row[x + k], k);
+        } else if (draw == PixelHitRows::kExact) {
           drawExact(x + k, y, row[x + k]);
-        else
-          drawKeyed(x + k, y, row[x + k], k);
+        }
       }
     }
   }
