@@ -76,7 +76,7 @@ class LineDrawer {
   /// put its point hit (empty without point hits: the paper's profile).
   /// With the surface profile, whose table holds no occupied value, these
   /// are the blocks of all the grid's occupied cells
-  /// (LocalGrid::applySurfaceGuards() need look nowhere else).
+  /// (applySurfaceGuards() need look nowhere else).
   const std::vector<uint8_t>& hitBlocks() const { return hit_blocks_; }
   /// Pyramid blocks per worker a pyramid's descent is split into: enough to share the work evenly.
   static constexpr int kPartsPerWorker = 16;

@@ -87,50 +87,7 @@ class LocalGrid {
   /// Number of cells that are not kUnknown.
   size_t countKnown() const;
 
-  /// Sets the cells holding exactly @p value within @p radius cells
-  /// (Chebyshev) of an occupied cell (log-odds > 0) to 0, no information;
-  /// returns how many (none for @p value 0). With value = the sky's
-  /// log-odds: a ray that measured no range says nothing next to what the
-  /// image did measure. With a @p pool, slabs of z on its workers: the same
-  /// grid and count. @p occupied_blocks as for applySurfaceGuards().
-  size_t silenceNearOccupied(float value, int radius, WorkerPool* pool = nullptr,
-                             const uint8_t* occupied_blocks = nullptr);
-
-  /// Sets the cells holding 0 (no information) that lie farther than
-  /// @p radius cells (Chebyshev) from every occupied cell to @p free_value;
-  /// returns how many. With the surface profile's gap: the gap says nothing
-  /// next to what the image measured, and is free space elsewhere. With a
-  /// @p pool, on its workers: the same grid and count.
-  size_t freeZerosAwayFromOccupied(float free_value, int radius, WorkerPool* pool = nullptr);
-
-  /// The surface profile's two guards at once: freeZerosAwayFromOccupied(
-  /// @p free_value, @p gap_radius), then silenceNearOccupied(@p sky_value,
-  /// @p sky_radius), the same grid in one pass over the occupied cells and
-  /// one over the grid. Returns the zeros set free; a radius of 0 is that
-  /// guard off. @p occupied_blocks, if given, holds numBlocks() flags, set
-  /// (nonzero) for every block that holds an occupied cell (a drawer that
-  /// knows where it put its hits: LineDrawer::hitBlocks()): the guards then
-  /// look only there, not at the whole grid. The same grid and count.
-  size_t applySurfaceGuards(float sky_value, int sky_radius, float free_value, int gap_radius,
-                            WorkerPool* pool = nullptr, const uint8_t* occupied_blocks = nullptr);
-
  private:
-  /// What the guards' first pass looks for around each occupied cell.
-  struct Guard {
-    float sky_value;  ///< cells holding it within sky_radius become 0
-    int sky_radius;
-    float gap_value;  ///< cells holding it within gap_radius are kept 0
-    int gap_radius;
-  };
-  /// The first pass, in slabs of z on @p pool's workers; returns the cells
-  /// it marked. @p occupied_blocks as for applySurfaceGuards().
-  size_t guardNearOccupied(const Guard& guard, WorkerPool* pool, const uint8_t* occupied_blocks);
-  /// guardNearOccupied() for the occupied cells in the slabs [z_begin, z_end).
-  size_t guardSlabs(const Guard& guard, int z_begin, int z_end, const uint8_t* occupied_blocks);
-  /// The second pass: the zeros left become @p free_value, the marks 0;
-  /// returns the zeros set free.
-  size_t settleMarks(float free_value, WorkerPool* pool);
-
   Eigen::Vector3i origin_index_ = Eigen::Vector3i::Zero();
   Eigen::Vector3i size_ = Eigen::Vector3i::Zero();
   double resolution_m_ = 1.0;

@@ -5,6 +5,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "stereo_occupancy/surface_guards.h"
+
 namespace stereo_occupancy {
 
 namespace {
@@ -177,7 +179,7 @@ DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::
   if (config_.sensor_model.profile == SensorProfile::kSurface) {
     // The lines flag where they put their hits, the surface profile's only occupied cells.
     const std::vector<uint8_t>& hit_blocks = line_drawer_.hitBlocks();
-    grid->applySurfaceGuards(table_.skyLogOdds(), config_.sensor_model.sky_guard_cells, table_.freeLogOdds(),
+    applySurfaceGuards(grid, table_.skyLogOdds(), config_.sensor_model.sky_guard_cells, table_.freeLogOdds(),
                              config_.sensor_model.gap_guard_cells, workers_.get(),
                              drawsLines() && hit_blocks.size() == grid->numBlocks() ? hit_blocks.data() : nullptr);
   }

@@ -12,6 +12,7 @@
 #include <tuple>
 
 #include "stereo_occupancy/disparity_drawer.h"
+#include "stereo_occupancy/surface_guards.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
 
 using namespace stereo_occupancy;
@@ -542,47 +543,6 @@ TEST(Drawing, ThreadCountsDrawTheSameDefaultGrids) {
   }
 }
 
-// The sky guard on a pool's workers against a plain one on small grids of
-// random cells, thin in z so that chunks meet everywhere: the cells of the
-// value within r of an occupied cell, and only those, become 0.
-TEST(Drawing, SkyGuardOnWorkersMatchesAPlainGuard) {
-  constexpr float kSky = -0.9f, kFree = -0.85f, kHit = 0.4f;
-  std::mt19937 rng(7);
-  const float kinds[] = {LocalGrid::kUnknown, kSky, kSky, kFree, 0.0f, kHit};
-  std::uniform_int_distribution<int> kind(0, 5);
-  for (int size_z : {3, 7, 12, 23}) {
-    LocalGrid grid;
-    grid.reset(Eigen::Vector3i::Zero(), Eigen::Vector3i(37, 5, size_z), 1.0);
-    for (size_t i = 0; i < grid.numCells(); ++i) grid.data()[i] = kinds[kind(rng)];
-    for (int radius : {1, 2}) {
-      LocalGrid plain = grid;
-      size_t expected = 0;
-      const Eigen::Vector3i n = grid.size();
-      for (int z = 0; z < n.z(); ++z)
-        for (int y = 0; y < n.y(); ++y)
-          for (int x = 0; x < n.x(); ++x) {
-            if (!(grid.at(x, y, z) > 0.0f)) continue;
-            for (int k = std::max(0, z - radius); k <= std::min(n.z() - 1, z + radius); ++k)
-              for (int j = std::max(0, y - radius); j <= std::min(n.y() - 1, y + radius); ++j)
-                for (int h = std::max(0, x - radius); h <= std::min(n.x() - 1, x + radius); ++h)
-                  if (plain.at(h, j, k) == kSky) {
-                    plain.at(h, j, k) = 0.0f;
-                    ++expected;
-                  }
-          }
-      ASSERT_GT(expected, 0u);
-      for (unsigned threads : {1u, 2u, 3u, 5u}) {
-        WorkerPool pool(threads);
-        LocalGrid guarded = grid;
-        const std::string what = "z " + std::to_string(size_z) + " radius " + std::to_string(radius) + " threads " +
-                                 std::to_string(threads);
-        EXPECT_EQ(guarded.silenceNearOccupied(kSky, radius, &pool), expected) << what;
-        EXPECT_EQ(std::memcmp(guarded.data(), plain.data(), plain.numCells() * sizeof(float)), 0) << what;
-      }
-    }
-  }
-}
-
 // The sky guard on a pool's workers silences the same cells, and as many.
 TEST(Drawing, SkyGuardOnWorkersSilencesTheSameCells) {
   const StereoCameraConfig cam_cfg;
@@ -598,14 +558,14 @@ TEST(Drawing, SkyGuardOnWorkersSilencesTheSameCells) {
     ASSERT_GE(drawn.size().z(), 4 * (2 * 2 + 1)) << "thick enough for chunks of slabs on two workers";
     for (int radius : {1, 2}) {
       LocalGrid alone = drawn;
-      const size_t expected = alone.silenceNearOccupied(sky, radius);
+      const size_t expected = silenceNearOccupied(&alone, sky, radius);
       silenced_in_all += expected;
       for (unsigned threads : {2u, 3u, 5u}) {
         WorkerPool pool(threads);
         LocalGrid shared = drawn;
         const std::string what =
             "pose " + std::to_string(p) + " radius " + std::to_string(radius) + " threads " + std::to_string(threads);
-        EXPECT_EQ(shared.silenceNearOccupied(sky, radius, &pool), expected) << what;
+        EXPECT_EQ(silenceNearOccupied(&shared, sky, radius, &pool), expected) << what;
         EXPECT_EQ(std::memcmp(shared.data(), alone.data(), alone.numCells() * sizeof(float)), 0) << what;
       }
     }

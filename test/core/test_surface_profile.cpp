@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "stereo_occupancy/disparity_drawer.h"
+#include "stereo_occupancy/surface_guards.h"
 #include "stereo_occupancy/worker_pool.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
 
@@ -386,31 +387,6 @@ TEST(SurfaceProfile, SkyGuardKeepsAPartlyMatchedWire) {
   EXPECT_GT(sky_free_guarded, 20);
 }
 
-// The guard itself: only cells holding exactly the given value, only within
-// the radius of an occupied cell, and nothing at radius 0.
-TEST(SurfaceProfile, SilenceNearOccupiedTouchesOnlyTheSkyNearHits) {
-  LocalGrid grid;
-  grid.reset({0, 0, 0}, {8, 8, 8}, kCell);
-  const float sky = -0.8f, free = -0.7f;
-  for (size_t i = 0; i < grid.numCells(); ++i) grid.data()[i] = sky;
-  grid.at(4, 4, 4) = 0.9f;
-  grid.at(5, 4, 4) = free;
-  EXPECT_EQ(grid.silenceNearOccupied(sky, 0), 0u);
-  EXPECT_EQ(grid.silenceNearOccupied(sky, 1), 25u);  // the 26 neighbours but the one measured free
-  EXPECT_EQ(grid.at(3, 3, 3), 0.0f);
-  EXPECT_EQ(grid.at(5, 4, 4), free);
-  EXPECT_EQ(grid.at(2, 4, 4), sky);
-  EXPECT_EQ(grid.at(4, 4, 4), 0.9f);
-  grid.at(0, 0, 0) = 0.9f;  // at the grid's corner: stays inside
-  // Around (4, 4, 4) the 124 within two cells but the 26 within one; around
-  // the corner 26, one of them, (2, 2, 2), shared.
-  EXPECT_EQ(grid.silenceNearOccupied(sky, 2), (124u - 26u) + 26u - 1u);
-  // Silencing 0 changes no cell, and counts none (the zeros it made above
-  // lie next to two occupied cells).
-  EXPECT_EQ(grid.silenceNearOccupied(0.0f, 2), 0u);
-  EXPECT_EQ(grid.silenceNearOccupied(-0.0f, 1), 0u);
-}
-
 // The gap guard: a wall at 20.1 m, where the gap is Δl = 0.95 m deep (four
 // cells). Without the guard the whole gap says nothing, so a noise hit two
 // cells in front of the wall would never be cleared by later views of it;
@@ -480,152 +456,6 @@ TEST(SurfaceProfile, BoundedPyramidKeepsAPostBeforeAWall) {
     EXPECT_GE(line[2], 80);  // at least the cell of the face: one column of sample points
     EXPECT_EQ(postCells(DrawingAlgorithm::kLinePyramidBounded, default_guard), line);
     EXPECT_EQ(postCells(DrawingAlgorithm::kLinePyramidBounded, 1)[0], 0);
-  }
-}
-
-// The guard's pass itself: only zeros, only farther than the radius from
-// every occupied cell; nothing at radius 0; the same on a pool's workers.
-TEST(SurfaceProfile, FreeZerosAwayFromOccupiedKeepsZerosNearHits) {
-  LocalGrid grid;
-  grid.reset({0, 0, 0}, {72, 64, 64}, kCell);  // more cells than one part of the pool's pass
-  const float free = -0.85f, other = -0.7f;
-  grid.at(10, 10, 10) = 0.9f;
-  grid.at(11, 10, 10) = 0.0f;  // Chebyshev distances 1, 2, 3 from the hit
-  grid.at(12, 11, 10) = 0.0f;
-  grid.at(13, 10, 8) = 0.0f;
-  grid.at(9, 10, 10) = other;  // not a zero: kept
-  grid.at(70, 60, 60) = 0.0f;  // far from every hit
-  const LocalGrid drawn = grid;
-  EXPECT_EQ(grid.freeZerosAwayFromOccupied(free, 0), 0u);
-  EXPECT_EQ(std::memcmp(grid.data(), drawn.data(), drawn.numCells() * sizeof(float)), 0);
-  EXPECT_EQ(grid.freeZerosAwayFromOccupied(free, 1), 3u);
-  EXPECT_EQ(grid.at(11, 10, 10), 0.0f);
-  EXPECT_EQ(grid.at(12, 11, 10), free);
-  EXPECT_EQ(grid.at(13, 10, 8), free);
-  EXPECT_EQ(grid.at(70, 60, 60), free);
-  EXPECT_EQ(grid.at(9, 10, 10), other);
-  EXPECT_EQ(grid.at(10, 10, 10), 0.9f);
-  EXPECT_EQ(grid.at(0, 0, 0), LocalGrid::kUnknown);
-  LocalGrid radius_two = drawn;
-  EXPECT_EQ(radius_two.freeZerosAwayFromOccupied(free, 2), 2u);
-  EXPECT_EQ(radius_two.at(12, 11, 10), 0.0f);
-  EXPECT_EQ(radius_two.at(13, 10, 8), free);
-  for (unsigned threads : {2u, 3u}) {
-    WorkerPool pool(threads);
-    LocalGrid shared = drawn;
-    EXPECT_EQ(shared.freeZerosAwayFromOccupied(free, 1, &pool), 3u) << threads;
-    EXPECT_EQ(std::memcmp(shared.data(), grid.data(), grid.numCells() * sizeof(float)), 0) << threads;
-  }
-}
-
-// Both guards in one pass are the gap guard, then the sky guard: the same
-// grid for every pair of radii, on one thread and on a pool.
-TEST(SurfaceProfile, BothGuardsAtOnceAreTheGapGuardThenTheSkyGuard) {
-  const float free = -0.85f, sky = std::nextafter(free, -1.0f);
-  LocalGrid drawn;
-  drawn.reset({0, 0, 0}, {73, 63, 65}, kCell);  // not a whole number of 16-cell blocks
-  // Hits, and around them zeros, sky and free cells at Chebyshev distances
-  // 1-3, also in other slabs of z (the pool's chunks are slabs).
-  const float values[] = {0.0f, sky, free, 0.0f, sky};
-  int n = 0;
-  for (int z = 4; z < 60; z += 9)
-    for (int y = 4; y < 60; y += 7)
-      for (int x = 4; x < 68; x += 8) {
-        drawn.at(x, y, z) = 0.9f;
-        for (int d = 1; d <= 3; ++d) {
-          drawn.at(x + d, y, z) = values[n++ % 5];
-          drawn.at(x - d, y + (d > 1), z) = values[n++ % 5];
-          drawn.at(x, y - 1, z + d) = values[n++ % 5];
-        }
-      }
-  drawn.at(72, 62, 64) = 0.0f;  // far from every hit, in the grid's last cell
-  for (int sky_radius : {0, 1, 2})
-    for (int gap_radius : {0, 1, 2}) {
-      LocalGrid expected = drawn;
-      const size_t freed = expected.freeZerosAwayFromOccupied(free, gap_radius);
-      expected.silenceNearOccupied(sky, sky_radius);
-      for (unsigned threads : {1u, 2u, 3u}) {
-        WorkerPool pool(threads);
-        LocalGrid both = drawn;
-        EXPECT_EQ(both.applySurfaceGuards(sky, sky_radius, free, gap_radius, &pool), freed)
-            << sky_radius << gap_radius << threads;
-        EXPECT_EQ(std::memcmp(both.data(), expected.data(), expected.numCells() * sizeof(float)), 0)
-            << sky_radius << " " << gap_radius << " " << threads;
-        EXPECT_EQ(both.at(72, 62, 64), gap_radius > 0 ? free : 0.0f);  // the last, partial block too
-      }
-    }
-  LocalGrid one_guard = drawn;
-  EXPECT_GT(one_guard.applySurfaceGuards(sky, 1, free, 1), 100u);  // zeros freed
-  EXPECT_GT(drawn.silenceNearOccupied(sky, 1), 100u);                // and sky silenced: both guards act here
-}
-
-// Both guards against a plain reference on random grids with runs of
-// adjacent hits in a row (the guard visits a run's neighbourhood once):
-// sky within sky_radius of a hit becomes 0, a zero within gap_radius of a
-// hit stays 0, every other zero becomes free; radii that differ too, and
-// the sky guard alone (the default). With the blocks that hold hits
-// flagged (as the lines flag them) the guards look only there: the same.
-TEST(SurfaceProfile, BothGuardsMatchAPlainReferenceAroundRunsOfHits) {
-  const float free = -0.85f, sky = std::nextafter(free, -1.0f), hit = 0.9f;
-  const float kinds[] = {LocalGrid::kUnknown, sky, sky, free, 0.0f, 0.0f};
-  std::mt19937 rng(11);
-  std::uniform_int_distribution<int> kind(0, 5), run_length(1, 5);
-  std::bernoulli_distribution starts_run(0.04);
-  LocalGrid drawn;
-  drawn.reset({0, 0, 0}, {37, 6, 9}, kCell);
-  const Eigen::Vector3i n = drawn.size();
-  for (size_t i = 0; i < drawn.numCells(); ++i) drawn.data()[i] = kinds[kind(rng)];
-  for (int z = 0; z < n.z(); ++z)
-    for (int y = 0; y < n.y(); ++y)
-      for (int x = 0; x < n.x(); ++x)
-        if (starts_run(rng))
-          for (int end = std::min(n.x(), x + run_length(rng)); x < end; ++x) drawn.at(x, y, z) = hit;
-  std::vector<int> nearest(drawn.numCells(), 1 << 20);  // Chebyshev distance to the nearest hit
-  for (int z = 0; z < n.z(); ++z)
-    for (int y = 0; y < n.y(); ++y)
-      for (int x = 0; x < n.x(); ++x)
-        for (int k = 0; k < n.z(); ++k)
-          for (int j = 0; j < n.y(); ++j)
-            for (int h = 0; h < n.x(); ++h)
-              if (drawn.at(h, j, k) == hit) {
-                int& best = nearest[drawn.linearIndex(x, y, z)];
-                best = std::min(best, std::max({std::abs(h - x), std::abs(j - y), std::abs(k - z)}));
-              }
-  auto nearestHit = [&](int x, int y, int z) { return nearest[drawn.linearIndex(x, y, z)]; };
-  std::vector<uint8_t> hit_blocks(drawn.numBlocks(), 0);  // 3 blocks a row, the last of 5 cells
-  for (int z = 0; z < n.z(); ++z)
-    for (int y = 0; y < n.y(); ++y)
-      for (int x = 0; x < n.x(); ++x)
-        if (drawn.at(x, y, z) == hit)
-          hit_blocks[(static_cast<size_t>(z) * n.y() + y) * drawn.blocksPerRow() + x / kInformationBlock] = 1;
-  for (const auto& [sky_radius, gap_radius] :
-       {std::pair{1, 2}, std::pair{2, 1}, std::pair{1, 1}, std::pair{2, 2}, std::pair{1, 0}, std::pair{2, 0}}) {
-    LocalGrid expected = drawn;
-    size_t freed = 0, silenced = 0;
-    for (int z = 0; z < n.z(); ++z)
-      for (int y = 0; y < n.y(); ++y)
-        for (int x = 0; x < n.x(); ++x) {
-          float& cell = expected.at(x, y, z);
-          if (cell == sky && nearestHit(x, y, z) <= sky_radius) {
-            cell = 0.0f;
-            ++silenced;
-          }
-          if (gap_radius > 0 && drawn.at(x, y, z) == 0.0f && nearestHit(x, y, z) > gap_radius) {
-            cell = free;
-            ++freed;
-          }
-        }
-    ASSERT_GT(silenced, 0u);
-    ASSERT_EQ(freed > 0, gap_radius > 0);
-    for (unsigned threads : {1u, 2u})
-      for (const uint8_t* flags : {static_cast<const uint8_t*>(nullptr), std::as_const(hit_blocks).data()}) {
-        WorkerPool pool(threads);
-        LocalGrid both = drawn;
-        const std::string what = "sky " + std::to_string(sky_radius) + " gap " + std::to_string(gap_radius) +
-                                 " threads " + std::to_string(threads) + (flags ? " flags" : "");
-        EXPECT_EQ(both.applySurfaceGuards(sky, sky_radius, free, gap_radius, &pool, flags), freed) << what;
-        EXPECT_EQ(std::memcmp(both.data(), expected.data(), expected.numCells() * sizeof(float)), 0) << what;
-      }
   }
 }
 
@@ -715,7 +545,7 @@ TEST(SurfaceProfile, SkyGuardOverTheHitBlocksIsTheGuardOverTheGrid) {
       config.sensor_model.sky_guard_cells = 0;  // unguarded, then guarded over the whole grid
       drawUnblurred(&expected);
       const LogOddsTable table(InverseSensorModel(config.sensor_model), kCell);
-      const size_t silenced = expected.silenceNearOccupied(table.skyLogOdds(), 1);
+      const size_t silenced = silenceNearOccupied(&expected, table.skyLogOdds(), 1);
       EXPECT_GT(silenced, 100u) << what;
       ASSERT_EQ(guarded.size(), expected.size()) << what;
       EXPECT_EQ(std::memcmp(guarded.data(), expected.data(), expected.numCells() * sizeof(float)), 0) << what;

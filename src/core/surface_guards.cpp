@@ -1,0 +1,207 @@
+#include "stereo_occupancy/surface_guards.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <limits>
+#include <vector>
+
+namespace stereo_occupancy {
+
+namespace {
+/// Marks a cell that the guards' second pass sets to 0: the negative normal
+/// float nearest 0, which no profile draws (a denormal would read as 0
+/// where denormals are flushed).
+constexpr float kKeepMark = -std::numeric_limits<float>::min();
+/// A value no cell holds: the guard of that value is off.
+constexpr float kNoValue = std::numeric_limits<float>::quiet_NaN();
+
+/// Cells per part of the second pass on a pool: a part reads 1 MiB, far
+/// more than its hand-out costs.
+constexpr size_t kSettleChunkCells = size_t{1} << 18;
+
+/// What the guards' first pass looks for around each occupied cell.
+struct Guard {
+  float sky_value;  ///< cells holding it within sky_radius become 0
+  int sky_radius;
+  float gap_value;  ///< cells holding it within gap_radius are kept 0
+  int gap_radius;
+};
+
+/// The two passes of the guards over one grid.
+class GuardPass {
+ public:
+  explicit GuardPass(LocalGrid* grid)
+      : grid_(*grid), data_(grid->data()), cells_(grid->numCells()), size_(grid->size()) {}
+  /// The first pass, in slabs of z on @p pool's workers; returns the cells
+  /// it marked. @p occupied_blocks as for applySurfaceGuards().
+  size_t guardNearOccupied(const Guard& guard, WorkerPool* pool, const uint8_t* occupied_blocks);
+  /// The second pass: the zeros left become @p free_value, the marks 0;
+  /// returns the zeros set free.
+  size_t settleMarks(float free_value, WorkerPool* pool);
+
+ private:
+  /// guardNearOccupied() for the occupied cells in the slabs [z_begin, z_end).
+  size_t guardSlabs(const Guard& guard, int z_begin, int z_end, const uint8_t* occupied_blocks);
+
+  const LocalGrid& grid_;
+  float* data_;
+  size_t cells_;
+  Eigen::Vector3i size_;
+};
+
+size_t GuardPass::guardNearOccupied(const Guard& guard, WorkerPool* pool, const uint8_t* occupied_blocks) {
+  const int radius = std::max(guard.sky_radius, guard.gap_radius);
+  const unsigned workers = pool ? pool->size() : 1;
+  // Two chunks of slabs per worker, each at least 2·radius + 1 thick: the
+  // even chunks first, then the odd ones, so that no two chunks running at
+  // once reach the same cell (a chunk writes radius slabs beyond its ends).
+  // A cell is marked whoever sees it first: the grid and the count do not
+  // depend on the order.
+  const int min_slabs = 2 * radius + 1;
+  const int chunk_slabs = std::max(min_slabs, (size_.z() + 2 * static_cast<int>(workers) - 1) /
+                                                  (2 * static_cast<int>(workers)));
+  const int chunks = (size_.z() + chunk_slabs - 1) / chunk_slabs;
+  if (workers == 1 || chunks < 2) return guardSlabs(guard, 0, size_.z(), occupied_blocks);
+  std::vector<size_t> marked(static_cast<size_t>(chunks), 0);
+  for (int parity = 0; parity < 2; ++parity)
+    pool->run(static_cast<size_t>(chunks - parity + 1) / 2, [&](size_t i, unsigned) {
+      const int chunk = 2 * static_cast<int>(i) + parity;
+      const int z_begin = chunk * chunk_slabs;
+      marked[chunk] = guardSlabs(guard, z_begin, std::min(size_.z(), z_begin + chunk_slabs), occupied_blocks);
+    });
+  size_t total = 0;
+  for (size_t n : marked) total += n;
+  return total;
+}
+
+size_t GuardPass::guardSlabs(const Guard& guard, int z_begin, int z_end, const uint8_t* occupied_blocks) {
+  const int radius = std::max(guard.sky_radius, guard.gap_radius);
+  // The sky guard's cells become 0 at once (nothing else reads them); the
+  // gap's zeros near a hit are marked, so that settleMarks() can tell them
+  // from the zeros far from every hit.
+  const float sky_to = guard.gap_radius > 0 ? kKeepMark : 0.0f;
+  // A guard that is off holds a value no cell holds: only two guards of
+  // different radii need the distance.
+  const bool by_distance = guard.sky_radius > 0 && guard.gap_radius > 0 && guard.sky_radius != guard.gap_radius;
+  const bool sky_only = guard.gap_radius <= 0;  // the default: one value to replace, at any distance in reach
+  size_t marked = 0;
+  // The cells within reach of a run [x0, x1] of occupied cells in row (y,
+  // z): the union of its cells' neighbourhoods, a row of the box at a time
+  // (marking is idempotent, so the union is what cell by cell would mark).
+  auto markAroundRun = [&](int x0, int x1, int y, int z) {
+    const int h_begin = std::max(0, x0 - radius), h_end = std::min(size_.x() - 1, x1 + radius);
+    for (int k = std::max(0, z - radius); k <= std::min(size_.z() - 1, z + radius); ++k)
+      for (int j = std::max(0, y - radius); j <= std::min(size_.y() - 1, y + radius); ++j) {
+        float* row = &data_[grid_.linearIndex(0, j, k)];
+        if (sky_only) {  // branch-free: a few cells a row, whose values a branch would mispredict
+          for (int h = h_begin; h <= h_end; ++h) {
+            const bool sky = row[h] == guard.sky_value;
+            marked += sky;
+            row[h] = sky ? sky_to : row[h];
+          }
+          continue;
+        }
+        const int dist_jk = std::max(std::abs(j - y), std::abs(k - z));
+        for (int h = h_begin; h <= h_end; ++h) {
+          float& cell = row[h];
+          const bool sky = cell == guard.sky_value, gap = cell == guard.gap_value;
+          if (!sky && !gap) continue;
+          const int reach = sky ? guard.sky_radius : guard.gap_radius;
+          if (by_distance && std::max({x0 - h, h - x1, dist_jk}) > reach) continue;  // Chebyshev to the run
+          cell = sky ? sky_to : kKeepMark;
+          ++marked;
+        }
+      }
+  };
+  // The runs of occupied cells in the block of row (y, z) from x_begin, cut
+  // at its end (the union of the pieces' neighbourhoods is the run's).
+  auto markBlock = [&](int x_begin, int y, int z) {
+    const float* row = &data_[grid_.linearIndex(0, y, z)];
+    const int x_end = std::min(size_.x(), x_begin + kInformationBlock);
+    for (int x = x_begin; x < x_end; ++x) {
+      if (!(row[x] > 0.0f)) continue;
+      const int x0 = x;
+      while (x + 1 < x_end && row[x + 1] > 0.0f) ++x;  // marks are never > 0: the run stays
+      markAroundRun(x0, x, y, z);
+    }
+  };
+  const int blocks_per_row = grid_.blocksPerRow();
+  if (occupied_blocks) {  // the drawer's flags: a few thousand of the grid's blocks
+    const size_t first = static_cast<size_t>(z_begin) * size_.y() * blocks_per_row;
+    const size_t last = static_cast<size_t>(z_end) * size_.y() * blocks_per_row;
+    for (size_t b = first; b < last; ++b) {
+      if (b % 8 == 0 && b + 8 <= last) {  // most flags are 0: eight at a time
+        uint64_t eight;
+        std::memcpy(&eight, occupied_blocks + b, sizeof eight);
+        if (eight == 0) {
+          b += 7;
+          continue;
+        }
+      }
+      if (!occupied_blocks[b]) continue;
+      const size_t row = b / blocks_per_row;
+      markBlock(static_cast<int>(b % blocks_per_row) * kInformationBlock, static_cast<int>(row % size_.y()),
+                static_cast<int>(row / size_.y()));
+    }
+    return marked;
+  }
+  for (int z = z_begin; z < z_end; ++z)
+    for (int y = 0; y < size_.y(); ++y) {
+      const float* row = &data_[grid_.linearIndex(0, y, z)];
+      for (int x = 0; x < size_.x(); x += kInformationBlock)
+        if (x + kInformationBlock > size_.x() || blockHasOccupied(row + x)) markBlock(x, y, z);
+    }
+  return marked;
+}
+
+size_t GuardPass::settleMarks(float free_value, WorkerPool* pool) {
+  // The gap's zeros and the marks are few: only the blocks that hold one are written.
+  auto settleCells = [free_value](float* cells, size_t n) {
+    size_t freed = 0;
+    for (size_t i = 0; i < n; ++i) {
+      const float v = cells[i];
+      freed += v == 0.0f;
+      cells[i] = v == 0.0f ? free_value : (v == kKeepMark ? 0.0f : v);
+    }
+    return freed;
+  };
+  auto settle = [&](size_t begin, size_t end) {
+    size_t freed = 0, i = begin;
+    for (; i + kInformationBlock <= end; i += kInformationBlock)
+      if (blockHolds(data_ + i, 0.0f, kKeepMark)) freed += settleCells(data_ + i, kInformationBlock);
+    return freed + settleCells(data_ + i, end - i);
+  };
+  if (!pool || pool->size() < 2 || cells_ <= kSettleChunkCells) return settle(0, cells_);
+  std::atomic<size_t> total{0};
+  pool->runInChunks(cells_, kSettleChunkCells, [&](size_t begin, size_t end) { total += settle(begin, end); });
+  return total;
+}
+
+}  // namespace
+
+size_t silenceNearOccupied(LocalGrid* grid, float value, int radius, WorkerPool* pool, const uint8_t* occupied_blocks) {
+  // A zero silenced is the zero it was: counted, it would be counted again by each run that reaches it.
+  if (radius <= 0 || value == 0.0f) return 0;
+  return GuardPass(grid).guardNearOccupied({value, radius, kNoValue, 0}, pool, occupied_blocks);
+}
+
+size_t freeZerosAwayFromOccupied(LocalGrid* grid, float free_value, int radius, WorkerPool* pool) {
+  if (radius <= 0) return 0;
+  GuardPass(grid).guardNearOccupied({kNoValue, 0, 0.0f, radius}, pool, nullptr);
+  return GuardPass(grid).settleMarks(free_value, pool);
+}
+
+size_t applySurfaceGuards(LocalGrid* grid, float sky_value, int sky_radius, float free_value, int gap_radius,
+                          WorkerPool* pool, const uint8_t* occupied_blocks) {
+  if (gap_radius <= 0) {
+    silenceNearOccupied(grid, sky_value, sky_radius, pool, occupied_blocks);
+    return 0;
+  }
+  GuardPass(grid).guardNearOccupied({sky_radius > 0 ? sky_value : kNoValue, sky_radius, 0.0f, gap_radius}, pool, occupied_blocks);
+  return GuardPass(grid).settleMarks(free_value, pool);
+}
+
+}  // namespace stereo_occupancy
