@@ -180,8 +180,8 @@ DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::
     // The lines flag where they put their hits, the surface profile's only occupied cells.
     const std::vector<uint8_t>& hit_blocks = line_drawer_.hitBlocks();
     applySurfaceGuards(grid, table_.skyLogOdds(), config_.sensor_model.sky_guard_cells, table_.freeLogOdds(),
-                             config_.sensor_model.gap_guard_cells, workers_.get(),
-                             drawsLines() && hit_blocks.size() == grid->numBlocks() ? hit_blocks.data() : nullptr);
+                       config_.sensor_model.gap_guard_cells, workers_.get(),
+                       drawsLines() && hit_blocks.size() == grid->numBlocks() ? hit_blocks.data() : nullptr);
   }
   if (config_.count_different_cells) stats.different_grid_cells = grid->countKnown();
   return stats;
