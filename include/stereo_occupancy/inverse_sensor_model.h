@@ -76,6 +76,15 @@ struct InverseSensorModelConfig {
   /// its gap and the guard freed it; every pixel's hit now keeps that post
   /// (docs/quality.md).
   int gap_guard_cells = 0;
+  /// kSurface: within this many cells (Chebyshev) of a cell the same image
+  /// measured as occupied, free space says nothing, unless it lies in front
+  /// of that cell as the camera sees it. A ray that passes beside a surface
+  /// on its way to what lies behind calls the surface's edge cells free where
+  /// a real matcher's disparities (fattened or thinned at depth edges) or the
+  /// cells' corners put no hit; on real stereo pairs this was 2-4 times the
+  /// surface cells called free near the camera (docs/quality_analysis.md).
+  /// In front of a surface, free space still clears earlier noise hits. 0: off.
+  int edge_guard_cells = 1;
 
   /// The parameters (parameter_table.h): f(spec, member) for each.
   template <typename Self, typename F>
@@ -94,6 +103,9 @@ struct InverseSensorModelConfig {
     f(numberParameter("gap_guard_cells", "cells", 0, 2,
                       "surface: the gap says nothing only this near a cell the image measured; 0: everywhere"),
       c.gap_guard_cells);
+    f(numberParameter("edge_guard_cells", "cells", 0, 1,
+                      "surface: free space says nothing beside (not in front of) a cell the image measured"),
+      c.edge_guard_cells);
     f(numberParameter("tail_sigmas", "Δl", 0.0, 3.0, "gaussian: how far behind the peak a measurement speaks"),
       c.tail_sigmas);
     f(numberParameter("k_m", "m", 0.001, 10.0, "significance k of one measurement (eq. 9)"), c.k_m);
@@ -107,7 +119,7 @@ struct InverseSensorModelConfig {
     return profile == o.profile && k_m == o.k_m && p_min == o.p_min && p_max == o.p_max &&
            tail_sigmas == o.tail_sigmas && p_hit == o.p_hit && p_free == o.p_free && p_sky == o.p_sky &&
            free_gap_sigmas == o.free_gap_sigmas && sky_guard_cells == o.sky_guard_cells &&
-           gap_guard_cells == o.gap_guard_cells;
+           gap_guard_cells == o.gap_guard_cells && edge_guard_cells == o.edge_guard_cells;
   }
 };
 

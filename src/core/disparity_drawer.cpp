@@ -179,8 +179,14 @@ DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::
   if (config_.sensor_model.profile == SensorProfile::kSurface) {
     // The lines flag where they put their hits, the surface profile's only occupied cells.
     const std::vector<uint8_t>& hit_blocks = line_drawer_.hitBlocks();
-    applySurfaceGuards(grid, table_.skyLogOdds(), config_.sensor_model.sky_guard_cells, table_.freeLogOdds(),
-                       config_.sensor_model.gap_guard_cells, workers_.get(),
+    SurfaceGuards guards;
+    guards.sky_value = table_.skyLogOdds();
+    guards.sky_radius = config_.sensor_model.sky_guard_cells;
+    guards.free_value = table_.freeLogOdds();
+    guards.gap_radius = config_.sensor_model.gap_guard_cells;
+    guards.edge_radius = config_.sensor_model.edge_guard_cells;
+    guards.grid_camera = T_W_C.translation() / grid->resolution() - grid->originIndex().cast<double>();
+    applySurfaceGuards(grid, guards, workers_.get(),
                        drawsLines() && hit_blocks.size() == grid->numBlocks() ? hit_blocks.data() : nullptr);
   }
   if (config_.count_different_cells) stats.different_grid_cells = grid->countKnown();

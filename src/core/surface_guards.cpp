@@ -28,7 +28,19 @@ struct Guard {
   int sky_radius;
   float gap_value;  ///< cells holding it within gap_radius are kept 0
   int gap_radius;
+  float edge_value = kNoValue;  ///< cells holding it within edge_radius, beside the cell, become 0
+  int edge_radius = 0;
+  Eigen::Vector3d grid_camera = Eigen::Vector3d::Zero();  ///< the camera centre in the grid's cells
 };
+
+/// True if cell @p f lies in front of cell @p hit as seen from @p grid_camera:
+/// at least half a cell nearer along the ray through the hit's centre (the
+/// free space its own measurement and the views of it clear), not beside it.
+bool inFrontOf(const Eigen::Vector3i& f, const Eigen::Vector3i& hit, const Eigen::Vector3d& grid_camera) {
+  const Eigen::Vector3d ray = hit.cast<double>().array() + 0.5 - grid_camera.array();
+  const double along = (f - hit).cast<double>().dot(ray);  // < -|ray| / 2, without the root
+  return along < 0.0 && along * along > 0.25 * ray.squaredNorm();
+}
 
 /// The two passes of the guards over one grid.
 class GuardPass {
@@ -53,7 +65,7 @@ class GuardPass {
 };
 
 size_t GuardPass::guardNearOccupied(const Guard& guard, WorkerPool* pool, const uint8_t* occupied_blocks) {
-  const int radius = std::max(guard.sky_radius, guard.gap_radius);
+  const int radius = std::max({guard.sky_radius, guard.gap_radius, guard.edge_radius});
   const unsigned workers = pool ? pool->size() : 1;
   // Two chunks of slabs per worker, each at least 2·radius + 1 thick: the
   // even chunks first, then the odd ones, so that no two chunks running at
@@ -78,16 +90,21 @@ size_t GuardPass::guardNearOccupied(const Guard& guard, WorkerPool* pool, const 
 }
 
 size_t GuardPass::guardSlabs(const Guard& guard, int z_begin, int z_end, const uint8_t* occupied_blocks) {
-  const int radius = std::max(guard.sky_radius, guard.gap_radius);
-  // The sky guard's cells become 0 at once (nothing else reads them); the
-  // gap's zeros near a hit are marked, so that settleMarks() can tell them
-  // from the zeros far from every hit.
-  const float sky_to = guard.gap_radius > 0 ? kKeepMark : 0.0f;
-  // A guard that is off holds a value no cell holds: only two guards of
-  // different radii need the distance.
-  const bool by_distance = guard.sky_radius > 0 && guard.gap_radius > 0 && guard.sky_radius != guard.gap_radius;
-  const bool sky_only = guard.gap_radius <= 0;  // the default: one value to replace, at any distance in reach
+  const int radius = std::max({guard.sky_radius, guard.gap_radius, guard.edge_radius});
+  // The sky and edge guards' cells become 0 at once (nothing else reads
+  // them); the gap's zeros near a hit are marked, so that settleMarks() can
+  // tell them from the zeros far from every hit.
+  const float silenced = guard.gap_radius > 0 ? kKeepMark : 0.0f;
+  // A guard that is off holds a value no cell holds: only guards of radii
+  // below the box's need the distance.
+  const bool sky_only = guard.gap_radius <= 0 && guard.edge_radius <= 0;  // one value to replace, anywhere in reach
   size_t marked = 0;
+  // True if cell (h, j, k) is not in front of one of the run's cells within the edge guard's reach.
+  auto besideRun = [&](int h, int j, int k, int x0, int x1, int y, int z) {
+    for (int x = std::max(x0, h - guard.edge_radius); x <= std::min(x1, h + guard.edge_radius); ++x)
+      if (!inFrontOf({h, j, k}, {x, y, z}, guard.grid_camera)) return true;
+    return false;
+  };
   // The cells within reach of a run [x0, x1] of occupied cells in row (y,
   // z): the union of its cells' neighbourhoods, a row of the box at a time
   // (marking is idempotent, so the union is what cell by cell would mark).
@@ -100,18 +117,19 @@ size_t GuardPass::guardSlabs(const Guard& guard, int z_begin, int z_end, const u
           for (int h = h_begin; h <= h_end; ++h) {
             const bool sky = row[h] == guard.sky_value;
             marked += sky;
-            row[h] = sky ? sky_to : row[h];
+            row[h] = sky ? silenced : row[h];
           }
           continue;
         }
         const int dist_jk = std::max(std::abs(j - y), std::abs(k - z));
         for (int h = h_begin; h <= h_end; ++h) {
           float& cell = row[h];
-          const bool sky = cell == guard.sky_value, gap = cell == guard.gap_value;
-          if (!sky && !gap) continue;
-          const int reach = sky ? guard.sky_radius : guard.gap_radius;
-          if (by_distance && std::max({x0 - h, h - x1, dist_jk}) > reach) continue;  // Chebyshev to the run
-          cell = sky ? sky_to : kKeepMark;
+          const bool sky = cell == guard.sky_value, gap = cell == guard.gap_value, edge = cell == guard.edge_value;
+          if (!sky && !gap && !edge) continue;
+          const int reach = sky ? guard.sky_radius : gap ? guard.gap_radius : guard.edge_radius;
+          if (reach < radius && std::max({x0 - h, h - x1, dist_jk}) > reach) continue;  // Chebyshev to the run
+          if (edge && !besideRun(h, j, k, x0, x1, y, z)) continue;
+          cell = gap ? kKeepMark : silenced;
           ++marked;
         }
       }
@@ -194,14 +212,22 @@ size_t freeZerosAwayFromOccupied(LocalGrid* grid, float free_value, int radius, 
   return GuardPass(grid).settleMarks(free_value, pool);
 }
 
-size_t applySurfaceGuards(LocalGrid* grid, float sky_value, int sky_radius, float free_value, int gap_radius,
-                          WorkerPool* pool, const uint8_t* occupied_blocks) {
-  if (gap_radius <= 0) {
-    silenceNearOccupied(grid, sky_value, sky_radius, pool, occupied_blocks);
+size_t applySurfaceGuards(LocalGrid* grid, const SurfaceGuards& guards, WorkerPool* pool,
+                          const uint8_t* occupied_blocks) {
+  if (guards.gap_radius <= 0 && guards.edge_radius <= 0) {
+    silenceNearOccupied(grid, guards.sky_value, guards.sky_radius, pool, occupied_blocks);
     return 0;
   }
-  GuardPass(grid).guardNearOccupied({sky_radius > 0 ? sky_value : kNoValue, sky_radius, 0.0f, gap_radius}, pool, occupied_blocks);
-  return GuardPass(grid).settleMarks(free_value, pool);
+  Guard guard{guards.sky_radius > 0 ? guards.sky_value : kNoValue, guards.sky_radius,
+              guards.gap_radius > 0 ? 0.0f : kNoValue, guards.gap_radius};
+  if (guards.edge_radius > 0) {
+    guard.edge_value = guards.free_value;
+    guard.edge_radius = guards.edge_radius;
+    guard.grid_camera = guards.grid_camera;
+  }
+  GuardPass pass(grid);
+  pass.guardNearOccupied(guard, pool, occupied_blocks);
+  return guards.gap_radius > 0 ? pass.settleMarks(guards.free_value, pool) : 0;
 }
 
 }  // namespace stereo_occupancy

@@ -4,9 +4,11 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "stereo_occupancy/local_grid.h"
@@ -17,6 +19,16 @@ using namespace stereo_occupancy;
 
 namespace {
 constexpr double kCell = 0.25;
+
+/// The sky and gap guards (the edge guard off).
+SurfaceGuards skyAndGap(float sky, int sky_radius, float free, int gap_radius) {
+  SurfaceGuards guards;
+  guards.sky_value = sky;
+  guards.sky_radius = sky_radius;
+  guards.free_value = free;
+  guards.gap_radius = gap_radius;
+  return guards;
+}
 }  // namespace
 
 // The guard itself: only cells holding exactly the given value, only within
@@ -108,7 +120,7 @@ TEST(SurfaceGuards, BothGuardsAtOnceAreTheGapGuardThenTheSkyGuard) {
       for (unsigned threads : {1u, 2u, 3u}) {
         WorkerPool pool(threads);
         LocalGrid both = drawn;
-        EXPECT_EQ(applySurfaceGuards(&both, sky, sky_radius, free, gap_radius, &pool), freed)
+        EXPECT_EQ(applySurfaceGuards(&both, skyAndGap(sky, sky_radius, free, gap_radius), &pool), freed)
             << sky_radius << gap_radius << threads;
         EXPECT_EQ(std::memcmp(both.data(), expected.data(), expected.numCells() * sizeof(float)), 0)
             << sky_radius << " " << gap_radius << " " << threads;
@@ -116,7 +128,7 @@ TEST(SurfaceGuards, BothGuardsAtOnceAreTheGapGuardThenTheSkyGuard) {
       }
     }
   LocalGrid one_guard = drawn;
-  EXPECT_GT(applySurfaceGuards(&one_guard, sky, 1, free, 1), 100u);  // zeros freed
+  EXPECT_GT(applySurfaceGuards(&one_guard, skyAndGap(sky, 1, free, 1)), 100u);  // zeros freed
   EXPECT_GT(silenceNearOccupied(&drawn, sky, 1), 100u);                // and sky silenced: both guards act here
 }
 
@@ -184,7 +196,7 @@ TEST(SurfaceGuards, BothGuardsMatchAPlainReferenceAroundRunsOfHits) {
         LocalGrid both = drawn;
         const std::string what = "sky " + std::to_string(sky_radius) + " gap " + std::to_string(gap_radius) +
                                  " threads " + std::to_string(threads) + (flags ? " flags" : "");
-        EXPECT_EQ(applySurfaceGuards(&both, sky, sky_radius, free, gap_radius, &pool, flags), freed) << what;
+        EXPECT_EQ(applySurfaceGuards(&both, skyAndGap(sky, sky_radius, free, gap_radius), &pool, flags), freed) << what;
         EXPECT_EQ(std::memcmp(both.data(), expected.data(), expected.numCells() * sizeof(float)), 0) << what;
       }
   }
@@ -228,5 +240,118 @@ TEST(SurfaceGuards, SkyGuardOnWorkersMatchesAPlainGuard) {
         EXPECT_EQ(std::memcmp(guarded.data(), plain.data(), plain.numCells() * sizeof(float)), 0) << what;
       }
     }
+  }
+}
+
+// The edge guard by hand: a hit at (4, 4, 4) seen along +x from far away.
+// The free cells beside it and behind it say nothing; the nine in front of
+// it (x = 3) stay free, and so do the cells out of reach.
+TEST(SurfaceGuards, EdgeGuardSilencesFreeSpaceBesideAHitNotInFrontOfIt) {
+  const float free = -0.85f, sky = std::nextafter(free, -1.0f);
+  LocalGrid grid;
+  grid.reset({0, 0, 0}, {9, 9, 9}, kCell);
+  for (size_t i = 0; i < grid.numCells(); ++i) grid.data()[i] = free;
+  grid.at(4, 4, 4) = 0.9f;
+  SurfaceGuards guards = skyAndGap(sky, 1, free, 0);
+  guards.edge_radius = 1;
+  guards.grid_camera = Eigen::Vector3d(-20.0, 4.5, 4.5);
+  LocalGrid unguarded = grid;
+  guards.edge_radius = 0;
+  EXPECT_EQ(applySurfaceGuards(&unguarded, guards), 0u);
+  EXPECT_EQ(std::memcmp(unguarded.data(), grid.data(), grid.numCells() * sizeof(float)), 0);  // off: nothing
+  guards.edge_radius = 1;
+  EXPECT_EQ(applySurfaceGuards(&grid, guards), 0u);  // no zeros set free: the gap guard is off
+  int silenced = 0;
+  for (int z = 0; z < 9; ++z)
+    for (int y = 0; y < 9; ++y)
+      for (int x = 0; x < 9; ++x) {
+        const int reach = std::max({std::abs(x - 4), std::abs(y - 4), std::abs(z - 4)});
+        const float v = grid.at(x, y, z);
+        if (reach == 0) continue;
+        if (reach > 1 || x == 3) {
+          EXPECT_EQ(v, free) << x << " " << y << " " << z;
+        } else {
+          EXPECT_EQ(v, 0.0f) << x << " " << y << " " << z;
+          ++silenced;
+        }
+      }
+  EXPECT_EQ(silenced, 17);  // 8 beside it (x = 4) and 9 behind it (x = 5)
+  // Seen from above (along -z), the cells above it (z = 5) are in front.
+  grid.reset({0, 0, 0}, {9, 9, 9}, kCell);
+  for (size_t i = 0; i < grid.numCells(); ++i) grid.data()[i] = free;
+  grid.at(4, 4, 4) = 0.9f;
+  guards.grid_camera = Eigen::Vector3d(4.5, 4.5, 30.0);
+  applySurfaceGuards(&grid, guards);
+  EXPECT_EQ(grid.at(4, 4, 5), free);
+  EXPECT_EQ(grid.at(3, 5, 5), free);
+  EXPECT_EQ(grid.at(3, 4, 4), 0.0f);
+  EXPECT_EQ(grid.at(5, 5, 3), 0.0f);
+}
+
+// The edge guard with the sky and gap guards against a plain reference on
+// random grids with runs of hits: a free cell within one cell of a hit and
+// not in front of it says nothing (0, or kept 0 from the gap guard), and
+// the rest is the other guards'; on workers and over the flagged blocks the same.
+TEST(SurfaceGuards, EdgeGuardMatchesAPlainReference) {
+  const float free = -0.85f, sky = std::nextafter(free, -1.0f), hit = 0.9f;
+  const float kinds[] = {LocalGrid::kUnknown, sky, free, free, free, 0.0f};
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<int> kind(0, 5), run_length(1, 5);
+  std::bernoulli_distribution starts_run(0.03);
+  LocalGrid drawn;
+  drawn.reset({0, 0, 0}, {35, 7, 9}, kCell);
+  const Eigen::Vector3i n = drawn.size();
+  for (size_t i = 0; i < drawn.numCells(); ++i) drawn.data()[i] = kinds[kind(rng)];
+  std::vector<Eigen::Vector3i> hits;
+  for (int z = 0; z < n.z(); ++z)
+    for (int y = 0; y < n.y(); ++y)
+      for (int x = 0; x < n.x(); ++x)
+        if (starts_run(rng))
+          for (int end = std::min(n.x(), x + run_length(rng)); x < end; ++x) drawn.at(x, y, z) = hit;
+  for (int z = 0; z < n.z(); ++z)
+    for (int y = 0; y < n.y(); ++y)
+      for (int x = 0; x < n.x(); ++x)
+        if (drawn.at(x, y, z) == hit) hits.emplace_back(x, y, z);
+  std::vector<uint8_t> hit_blocks(drawn.numBlocks(), 0);
+  for (const Eigen::Vector3i& c : hits)
+    hit_blocks[(static_cast<size_t>(c.z()) * n.y() + c.y()) * drawn.blocksPerRow() + c.x() / kInformationBlock] = 1;
+  const Eigen::Vector3d camera(-3.0, 12.0, 20.0);  // above and to the side: rays cross every axis
+  for (int gap_radius : {0, 1}) {
+    LocalGrid expected = drawn;
+    size_t freed = 0;
+    int silenced = 0, kept_free = 0;
+    for (int z = 0; z < n.z(); ++z)
+      for (int y = 0; y < n.y(); ++y)
+        for (int x = 0; x < n.x(); ++x) {
+          const Eigen::Vector3i f(x, y, z);
+          int nearest = 1 << 20;
+          bool beside = false;
+          for (const Eigen::Vector3i& h : hits) {
+            const int d = (f - h).cwiseAbs().maxCoeff();
+            nearest = std::min(nearest, d);
+            const Eigen::Vector3d ray = h.cast<double>().array() + 0.5 - camera.array();
+            if (d == 1 && !((f - h).cast<double>().dot(ray) < -0.5 * ray.norm())) beside = true;
+          }
+          float& cell = expected.at(x, y, z);
+          const float was = drawn.at(x, y, z);
+          if (was == sky && nearest <= 1) cell = 0.0f;
+          if (was == free && beside) cell = 0.0f, ++silenced;
+          if (was == free && nearest == 1 && !beside) ++kept_free;
+          if (gap_radius > 0 && was == 0.0f && nearest > gap_radius) cell = free, ++freed;
+        }
+    ASSERT_GT(silenced, 50);
+    ASSERT_GT(kept_free, 20);  // in front of a hit
+    for (unsigned threads : {1u, 2u, 3u})
+      for (const uint8_t* flags : {static_cast<const uint8_t*>(nullptr), std::as_const(hit_blocks).data()}) {
+        WorkerPool pool(threads);
+        LocalGrid guarded = drawn;
+        SurfaceGuards guards = skyAndGap(sky, 1, free, gap_radius);
+        guards.edge_radius = 1;
+        guards.grid_camera = camera;
+        const std::string what =
+            "gap " + std::to_string(gap_radius) + " threads " + std::to_string(threads) + (flags ? " flags" : "");
+        EXPECT_EQ(applySurfaceGuards(&guarded, guards, &pool, flags), freed) << what;
+        EXPECT_EQ(std::memcmp(guarded.data(), expected.data(), expected.numCells() * sizeof(float)), 0) << what;
+      }
   }
 }
