@@ -29,7 +29,7 @@
 #include <string>
 
 #include "stereo_occupancy/DisparityMapperConfig.h"
-#include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/ros/map_conversions.h"
 #include "stereo_occupancy/ros/mapping_pipeline.h"
 #include "stereo_occupancy/ros/parameters.h"
 #include "stereo_occupancy/time_statistics.h"

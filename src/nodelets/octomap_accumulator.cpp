@@ -22,7 +22,7 @@
 #include "stereo_occupancy/BoundingBoxQuery.h"
 #include "stereo_occupancy/GetOctomap.h"
 #include "stereo_occupancy/projected_map.h"
-#include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/ros/map_conversions.h"
 #include "stereo_occupancy/ros/mapping_pipeline.h"
 #include "stereo_occupancy/ros/parameters.h"
 #include "stereo_occupancy/time_statistics.h"

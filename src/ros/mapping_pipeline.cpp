@@ -8,7 +8,8 @@
 #include <sstream>
 #include <utility>
 
-#include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/ros/input_conversions.h"
+#include "stereo_occupancy/ros/map_conversions.h"
 
 namespace stereo_occupancy {
 

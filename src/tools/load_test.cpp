@@ -23,7 +23,7 @@
 #include <vector>
 
 #include "stereo_occupancy/OccupancyUpdate.h"
-#include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/ros/input_conversions.h"
 #include "stereo_occupancy/sim/flight_simulation.h"
 #include "tool_support.h"
 

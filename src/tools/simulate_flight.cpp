@@ -20,7 +20,7 @@
 #include <iostream>
 #include <string>
 
-#include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/ros/input_conversions.h"
 #include "stereo_occupancy/sim/flight_simulation.h"
 #include "progress.h"
 #include "tool_support.h"

@@ -18,7 +18,7 @@
 #include <string>
 #include <vector>
 
-#include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/ros/input_conversions.h"
 #include "stereo_occupancy/store/tile_store.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
 

@@ -15,7 +15,8 @@
 #include <utility>
 #include <vector>
 
-#include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/ros/input_conversions.h"
+#include "stereo_occupancy/ros/map_conversions.h"
 #include "stereo_occupancy/ros/mapping_pipeline.h"
 #include "stereo_occupancy/ros/parameters.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"

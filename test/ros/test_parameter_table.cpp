@@ -331,3 +331,55 @@ TEST(LaunchFile, ArgsNotGivenLeaveTheConfigsValues) {
   EXPECT_EQ(given.at("/octomap_accumulator/save_dir"), "/tmp/other");
   EXPECT_EQ(given.at("/octomap_accumulator/map_file"), "/tmp/my_map.ot");
 }
+
+TEST(Parameters, DefaultsAreValidAndBadValuesNameTheParameter) {
+  DisparityMapperParameters mapper;
+  std::string why;
+  EXPECT_TRUE(mapper.isValid(&why)) << why;
+  mapper.camera.max_range_m = -1.0;
+  EXPECT_FALSE(mapper.isValid(&why));
+  EXPECT_NE(why.find("max_range_m"), std::string::npos) << why;
+  mapper = DisparityMapperParameters();
+  mapper.drawing.sensor_model.p_min = 0.7;
+  EXPECT_FALSE(mapper.isValid(&why));
+  EXPECT_NE(why.find("p_min"), std::string::npos) << why;
+  OctomapAccumulatorParameters acc;
+  EXPECT_TRUE(acc.isValid(&why)) << why;
+  for (const char* escaping : {"../escape", "..", ".", "", ".hidden", "a b", "map\n"}) {
+    acc.map_name = escaping;
+    EXPECT_FALSE(acc.isValid(&why)) << "'" << escaping << "'";
+    EXPECT_NE(why.find("map_name"), std::string::npos);
+  }
+  for (const char* plain : {"flight_2026-12-01", "map.v2", "M"}) {
+    acc.map_name = plain;
+    EXPECT_TRUE(acc.isValid(&why)) << plain << ": " << why;
+  }
+  acc = OctomapAccumulatorParameters();
+  acc.map.max_update_cells = 0;
+  EXPECT_FALSE(acc.isValid(&why));
+  EXPECT_NE(why.find("max_update_cells"), std::string::npos) << why;
+}
+
+TEST(Parameters, FromNameValuePairs) {
+  DisparityMapperParameters mapper;
+  OctomapAccumulatorParameters accumulator;
+  std::string why;
+  ASSERT_TRUE(loadParameters({{"algorithm", "raytrace"}, {"resolution_m", "0.5"}, {"use_depth", "true"},
+                              {"queue_size", "7"}, {"map_name", "flight"}},
+                             &mapper, &accumulator, &why))
+      << why;
+  EXPECT_EQ(mapper.drawing.algorithm, DrawingAlgorithm::kRayTrace);
+  EXPECT_DOUBLE_EQ(mapper.drawing.resolution_m, 0.5);
+  EXPECT_DOUBLE_EQ(accumulator.map.resolution_m, 0.5);  // a name both have sets both
+  EXPECT_TRUE(mapper.use_depth);
+  EXPECT_EQ(mapper.queue_size, 7);
+  EXPECT_EQ(accumulator.map_name, "flight");
+  mapper = DisparityMapperParameters();
+  EXPECT_FALSE(loadParameters({{"resolution", "0.5"}}, &mapper, &accumulator, &why));
+  EXPECT_NE(why.find("unknown parameter 'resolution'"), std::string::npos) << why;
+  EXPECT_FALSE(loadParameters({{"queue_size", "many"}}, &mapper, &accumulator, &why));
+  EXPECT_NE(why.find("queue_size"), std::string::npos) << why;
+  EXPECT_EQ(mapper.queue_size, 5);  // unchanged by the unreadable value
+  EXPECT_FALSE(loadParameters({{"p_min", "0.8"}}, &mapper, &accumulator, &why));
+  EXPECT_NE(why.find("p_min"), std::string::npos) << why;
+}

@@ -38,7 +38,8 @@
 
 #include "stereo_occupancy/OccupancyUpdate.h"
 #include "stereo_occupancy/Octomap.h"
-#include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/ros/input_conversions.h"
+#include "stereo_occupancy/ros/map_conversions.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
 #include "wait_for.h"
 

@@ -22,7 +22,8 @@
 
 #include "mono_image.h"
 #include "stereo_occupancy/GetOctomap.h"
-#include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/ros/input_conversions.h"
+#include "stereo_occupancy/ros/map_conversions.h"
 
 using namespace stereo_occupancy;
 

@@ -10,7 +10,8 @@
 #include <string>
 
 #include "stereo_occupancy/GetOctomap.h"
-#include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/ros/input_conversions.h"
+#include "stereo_occupancy/ros/map_conversions.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
 
 using namespace stereo_occupancy;

@@ -1,4 +1,4 @@
-// Message conversion and parameter validation (no roscore needed).
+// The maps and their messages (no roscore needed).
 
 #include <gtest/gtest.h>
 #include <ros/message_traits.h>
@@ -10,7 +10,7 @@
 
 #include "stereo_occupancy/BoundingBoxQuery.h"
 #include "stereo_occupancy/GetOctomap.h"
-#include "stereo_occupancy/ros/conversions.h"
+#include "stereo_occupancy/ros/map_conversions.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
 
 using namespace stereo_occupancy;
@@ -75,115 +75,6 @@ TEST(Conversions, OccupancyUpdateRoundTrip) {
   bad.size[0] = 0x80000000u;  // not an int
   GridUpdateView view;
   EXPECT_FALSE(viewOf(bad, &view, &why));
-}
-
-TEST(Conversions, CameraFromDisparityImage) {
-  stereo_msgs::DisparityImage msg;
-  msg.image.width = 640;
-  msg.image.height = 480;
-  msg.f = 700.0f;
-  msg.T = 0.3f;
-  msg.min_disparity = 0.0f;
-  msg.max_disparity = 128.0f;
-  msg.delta_d = 0.0625f;
-  DisparityMapperParameters params;
-  StereoCameraConfig cam;
-  std::string why;
-  ASSERT_TRUE(cameraFromDisparityImage(msg, nullptr, params, &cam, &why)) << why;
-  EXPECT_DOUBLE_EQ(cam.focal_length_px, 700.0);
-  EXPECT_NEAR(cam.baseline_m, 0.3, 1e-7);
-  EXPECT_DOUBLE_EQ(cam.cx_px, 319.5);
-  EXPECT_DOUBLE_EQ(cam.max_disparity_px, 128.0);
-  EXPECT_DOUBLE_EQ(cam.delta_d_px, 0.5);  // the parameter: at least the message's 1/16 px
-  sensor_msgs::CameraInfo info;
-  info.width = 640;
-  info.height = 480;
-  info.P[0] = 700.0;
-  info.P[2] = 330.0;
-  info.P[6] = 250.0;
-  ASSERT_TRUE(cameraFromDisparityImage(msg, &info, params, &cam, &why));
-  EXPECT_DOUBLE_EQ(cam.cx_px, 330.0);
-  EXPECT_DOUBLE_EQ(cam.cy_px, 250.0);
-  for (float bad_f : {0.0f, -700.0f, std::nanf(""), INFINITY}) {
-    msg.f = bad_f;
-    EXPECT_FALSE(cameraFromDisparityImage(msg, nullptr, params, &cam, &why)) << bad_f;
-  }
-  msg.f = 700.0f;
-  msg.T = -0.3f;
-  EXPECT_FALSE(cameraFromDisparityImage(msg, nullptr, params, &cam, &why));
-  // A camera_info whose principal point is 10^12 px away: refused with the reason.
-  msg.T = 0.3f;
-  info.P[2] = 1e12;
-  EXPECT_FALSE(cameraFromDisparityImage(msg, &info, params, &cam, &why));
-  EXPECT_NE(why.find("principal point"), std::string::npos) << why;
-  info.P[2] = -100.0;  // a little outside the image, as rectification may put it: taken
-  EXPECT_TRUE(cameraFromDisparityImage(msg, &info, params, &cam, &why)) << why;
-}
-
-TEST(Conversions, PoseFromTransform) {
-  geometry_msgs::TransformStamped t;
-  t.transform.translation.x = 1.0;
-  t.transform.rotation.w = 1.0;
-  Eigen::Isometry3d T;
-  ASSERT_TRUE(poseFromTransform(t, &T));
-  EXPECT_EQ(T.translation(), Eigen::Vector3d(1, 0, 0));
-  t.transform.rotation.w = 2.0;  // not a unit quaternion
-  EXPECT_FALSE(poseFromTransform(t, &T));
-  t.transform.rotation.w = 1.0;
-  t.transform.translation.y = std::nan("");
-  EXPECT_FALSE(poseFromTransform(t, &T));
-}
-
-TEST(Parameters, DefaultsAreValidAndBadValuesNameTheParameter) {
-  DisparityMapperParameters mapper;
-  std::string why;
-  EXPECT_TRUE(mapper.isValid(&why)) << why;
-  mapper.camera.max_range_m = -1.0;
-  EXPECT_FALSE(mapper.isValid(&why));
-  EXPECT_NE(why.find("max_range_m"), std::string::npos) << why;
-  mapper = DisparityMapperParameters();
-  mapper.drawing.sensor_model.p_min = 0.7;
-  EXPECT_FALSE(mapper.isValid(&why));
-  EXPECT_NE(why.find("p_min"), std::string::npos) << why;
-  OctomapAccumulatorParameters acc;
-  EXPECT_TRUE(acc.isValid(&why)) << why;
-  for (const char* escaping : {"../escape", "..", ".", "", ".hidden", "a b", "map\n"}) {
-    acc.map_name = escaping;
-    EXPECT_FALSE(acc.isValid(&why)) << "'" << escaping << "'";
-    EXPECT_NE(why.find("map_name"), std::string::npos);
-  }
-  for (const char* plain : {"flight_2026-12-01", "map.v2", "M"}) {
-    acc.map_name = plain;
-    EXPECT_TRUE(acc.isValid(&why)) << plain << ": " << why;
-  }
-  acc = OctomapAccumulatorParameters();
-  acc.map.max_update_cells = 0;
-  EXPECT_FALSE(acc.isValid(&why));
-  EXPECT_NE(why.find("max_update_cells"), std::string::npos) << why;
-}
-
-TEST(Parameters, FromNameValuePairs) {
-  DisparityMapperParameters mapper;
-  OctomapAccumulatorParameters accumulator;
-  std::string why;
-  ASSERT_TRUE(loadParameters({{"algorithm", "raytrace"}, {"resolution_m", "0.5"}, {"use_depth", "true"},
-                              {"queue_size", "7"}, {"map_name", "flight"}},
-                             &mapper, &accumulator, &why))
-      << why;
-  EXPECT_EQ(mapper.drawing.algorithm, DrawingAlgorithm::kRayTrace);
-  EXPECT_DOUBLE_EQ(mapper.drawing.resolution_m, 0.5);
-  EXPECT_DOUBLE_EQ(accumulator.map.resolution_m, 0.5);  // a name both have sets both
-  EXPECT_TRUE(mapper.use_depth);
-  EXPECT_EQ(mapper.queue_size, 7);
-  EXPECT_EQ(accumulator.map_name, "flight");
-  mapper = DisparityMapperParameters();
-  EXPECT_FALSE(loadParameters({{"resolution", "0.5"}}, &mapper, &accumulator, &why));
-  EXPECT_NE(why.find("unknown parameter 'resolution'"), std::string::npos) << why;
-  EXPECT_FALSE(loadParameters({{"queue_size", "many"}}, &mapper, &accumulator, &why));
-  EXPECT_NE(why.find("queue_size"), std::string::npos) << why;
-  EXPECT_EQ(mapper.queue_size, 5);  // unchanged by the unreadable value
-  EXPECT_FALSE(loadParameters({{"p_min", "0.8"}}, &mapper, &accumulator, &why));
-  EXPECT_NE(why.find("p_min"), std::string::npos) << why;
 }
 
 TEST(Conversions, OctreeToMessageAndBack) {
