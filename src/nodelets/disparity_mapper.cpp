@@ -20,8 +20,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <chrono>
-#include <ctime>
 #include <cstdio>
 #include <memory>
 #include <mutex>
@@ -32,7 +30,7 @@
 #include "stereo_occupancy/ros/map_conversions.h"
 #include "stereo_occupancy/ros/mapping_pipeline.h"
 #include "stereo_occupancy/ros/parameters.h"
-#include "stereo_occupancy/time_statistics.h"
+#include "stereo_occupancy/ros/processing_times.h"
 
 namespace stereo_occupancy {
 
@@ -49,16 +47,6 @@ constexpr double kNoProgressWarnS = 5.0;
 constexpr double kWarnThrottleS = 5.0;
 /// The world-frame warning repeats less often: it names every frame in tf [s].
 constexpr double kWorldFrameWarnThrottleS = 10.0;
-
-/// Per-image timings kept for the summary at shutdown (at 30 Hz, nine hours).
-constexpr size_t kMaxTimings = 1000000;
-
-/// CPU time of the calling thread [ms].
-double threadCpuMs() {
-  timespec t{};
-  ::clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return 1e3 * static_cast<double>(t.tv_sec) + 1e-6 * static_cast<double>(t.tv_nsec);
-}
 
 /// The values in use, as the dynamic_reconfigure server shows them.
 void toConfig(const DisparityMapperParameters& p, DisparityMapperConfig* config) {
@@ -110,12 +98,7 @@ class DisparityMapper : public nodelet::Nodelet {
   std::unique_ptr<FrameMapping> mapping_;  ///< the pipeline: checks, draw, update
   sensor_msgs::CameraInfoConstPtr camera_info_;
   uint64_t filter_dropped_ = 0;  ///< images the tf filter dropped (no pose in time); the pipeline counts the rest
-  double last_processing_ms_ = 0.0, max_processing_ms_ = 0.0;
-  std::vector<double> processing_ms_;  ///< per image, for the summary at shutdown (bounded)
-  std::vector<double> window_processing_ms_;  ///< per image since the last diagnostics report
-  /// The same span in the callback thread's CPU time: the work without the
-  /// waits for a core that other threads and processes hold.
-  std::vector<double> processing_cpu_ms_;
+  ProcessingTimes processing_times_{/*cpu_time=*/true};  ///< per image: draw, blur, encode, publish
   std::string last_problem_;
   ros::Time last_image_stamp_;
   uint64_t time_jumps_back_ = 0;
@@ -217,9 +200,9 @@ void DisparityMapper::onInit() {
 
 DisparityMapper::~DisparityMapper() {
   std::lock_guard<std::mutex> lock(mutex_);
-  if (processing_ms_.empty()) return;
-  const TimeStatistics wall = TimeStatistics::of(processing_ms_);
-  const TimeStatistics cpu = TimeStatistics::of(processing_cpu_ms_);
+  if (processing_times_.empty()) return;
+  const TimeStatistics wall = processing_times_.statistics();
+  const TimeStatistics cpu = processing_times_.cpuStatistics();
   const FrameCounters& n = mapping_->counters();
   const DisparityMapperParameters& params = mapping_->parameters();
   // One line for scripts: counts and the processing time per image (draw,
@@ -337,8 +320,7 @@ template <class MapImage>
 void DisparityMapper::process(const char* what, MapImage&& map_image) {
   input_rate_->tick();
   std::lock_guard<std::mutex> lock(mutex_);
-  const auto start = std::chrono::steady_clock::now();
-  const double start_cpu_ms = threadCpuMs();
+  const ProcessingTimes::Start start = processing_times_.start();
   FrameResult result;
   const OccupancyUpdatePtr update = map_image(camera_info_, &result);  // catches what it throws
   if (!update) {
@@ -373,13 +355,7 @@ void DisparityMapper::process(const char* what, MapImage&& map_image) {
       NODELET_WARN_THROTTLE(kWarnThrottleS, "no local_grid_cloud for this image: %s", e.what());
     }
   }
-  last_processing_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-  max_processing_ms_ = std::max(max_processing_ms_, last_processing_ms_);
-  if (processing_ms_.size() < kMaxTimings) {
-    processing_ms_.push_back(last_processing_ms_);
-    processing_cpu_ms_.push_back(threadCpuMs() - start_cpu_ms);
-  }
-  if (window_processing_ms_.size() < kMaxTimings) window_processing_ms_.push_back(last_processing_ms_);
+  processing_times_.stop(start);
 }
 
 void DisparityMapper::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
@@ -400,11 +376,10 @@ void DisparityMapper::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
   status.add("mapped nothing", n.mapped_nothing);
   status.add("camera_info not used", n.info_mismatch);
   status.add("time jumps back", time_jumps_back_);
-  status.add("last processing time [ms]", last_processing_ms_);
-  status.add("max processing time [ms]", max_processing_ms_);
+  status.add("last processing time [ms]", processing_times_.lastMs());
+  status.add("max processing time [ms]", processing_times_.maxMs());
   // Since the last report (1 s): what a soak plots over time.
-  const TimeStatistics window = TimeStatistics::of(window_processing_ms_);
-  window_processing_ms_.clear();
+  const TimeStatistics window = processing_times_.takeWindow();
   status.add("processing time p50 since last report [ms]", window.median_ms);
   status.add("processing time p99 since last report [ms]", window.p99_ms);
 }

@@ -25,7 +25,7 @@
 #include "stereo_occupancy/ros/map_conversions.h"
 #include "stereo_occupancy/ros/mapping_pipeline.h"
 #include "stereo_occupancy/ros/parameters.h"
-#include "stereo_occupancy/time_statistics.h"
+#include "stereo_occupancy/ros/processing_times.h"
 
 namespace stereo_occupancy {
 
@@ -37,8 +37,6 @@ constexpr double kWarnThrottleS = 5.0;
 constexpr const char* kLiveOnlySuffix = "_live_only";
 /// A failing periodic save repeats its error at most this often [s].
 constexpr double kSaveErrorThrottleS = 60.0;
-/// Per-update timings kept for the summary at shutdown.
-constexpr size_t kMaxTimings = 1000000;
 }  // namespace
 
 class OctomapAccumulator : public nodelet::Nodelet {
@@ -82,9 +80,7 @@ class OctomapAccumulator : public nodelet::Nodelet {
   std::unique_ptr<MapFusion> fusion_;  ///< the pipeline: checks, fusion, pruning
   uint64_t saves_failed_ = 0;
   bool last_save_failed_ = false;  ///< diagnostics ERROR until a save succeeds again
-  double last_fusion_ms_ = 0.0, max_fusion_ms_ = 0.0;
-  std::vector<double> fusion_ms_;  ///< per update, for the summary at shutdown (bounded)
-  std::vector<double> window_fusion_ms_;  ///< per update since the last diagnostics report
+  ProcessingTimes fusion_times_;  ///< per update fused
   std::string last_problem_;
   std::string database_problem_;  ///< why the database could not be opened; empty if it was
   bool changed_since_publish_ = true;  ///< the map changed since the markers went out
@@ -219,9 +215,9 @@ void OctomapAccumulator::onInit() {
 
 OctomapAccumulator::~OctomapAccumulator() {
   std::unique_lock<std::mutex> lock(mutex_);
-  if (!fusion_ms_.empty()) {
+  if (!fusion_times_.empty()) {
     // One line for scripts, on stderr (rosconsole may be gone at shutdown).
-    const TimeStatistics fusion = TimeStatistics::of(fusion_ms_);
+    const TimeStatistics fusion = fusion_times_.statistics();
     std::fprintf(stderr,
                  "OctomapAccumulator summary: updates_received=%lu updates_refused=%lu updates_lost=%lu "
                  "fusion_ms_median=%.3f fusion_ms_p99=%.3f fusion_ms_max=%.3f\n",
@@ -254,7 +250,7 @@ void OctomapAccumulator::updateCallback(const ros::MessageEvent<const OccupancyU
   const bool frame_chosen = !fusion_->frameId().empty();
   const uint64_t lost_before = fusion_->counters().lost;
   std::string why;
-  const auto start = std::chrono::steady_clock::now();
+  const ProcessingTimes::Start start = fusion_times_.start();
   bool fused = false;
   try {
     fused = fusion_->fuse(*msg, &why, event.getPublisherName());  // reads the message in place
@@ -277,10 +273,7 @@ void OctomapAccumulator::updateCallback(const ros::MessageEvent<const OccupancyU
                           static_cast<unsigned long>(fusion_->counters().refused), why.c_str());
     return;
   }
-  last_fusion_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-  max_fusion_ms_ = std::max(max_fusion_ms_, last_fusion_ms_);
-  if (fusion_ms_.size() < kMaxTimings) fusion_ms_.push_back(last_fusion_ms_);
-  if (window_fusion_ms_.size() < kMaxTimings) window_fusion_ms_.push_back(last_fusion_ms_);
+  fusion_times_.stop(start);
   if (!frame_chosen) NODELET_INFO("the map is in frame '%s' (the first update's)", fusion_->frameId().c_str());
   changed_since_publish_ = full_changed_ = true;
   const bool trim = fusion_->mission().takeFreedMemory();
@@ -557,11 +550,10 @@ void OctomapAccumulator::diagnose(diagnostic_updater::DiagnosticStatusWrapper& s
   } else if (!database_problem_.empty()) {
     status.mergeSummary(diagnostic_msgs::DiagnosticStatus::ERROR, "no database: " + database_problem_);
   }
-  status.add("last fusion time [ms]", last_fusion_ms_);
-  status.add("max fusion time [ms]", max_fusion_ms_);
+  status.add("last fusion time [ms]", fusion_times_.lastMs());
+  status.add("max fusion time [ms]", fusion_times_.maxMs());
   // Since the last report (1 s): what a soak plots over time.
-  const TimeStatistics window = TimeStatistics::of(window_fusion_ms_);
-  window_fusion_ms_.clear();
+  const TimeStatistics window = fusion_times_.takeWindow();
   status.add("updates fused since last report", window.count);
   status.add("fusion time p50 since last report [ms]", window.median_ms);
   status.add("fusion time p99 since last report [ms]", window.p99_ms);
