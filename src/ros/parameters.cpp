@@ -1,7 +1,6 @@
 #include "stereo_occupancy/ros/parameters.h"
 
 #include <algorithm>
-#include <cctype>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
@@ -15,13 +14,6 @@ bool fail(std::string* why, const std::string& text) {
   if (why) *why = text;
   return false;
 }
-/// A name that stays inside its directory: no '/', not "." or "..", no hidden file.
-bool isPlainFileName(const std::string& name) {
-  if (name.empty() || name[0] == '.') return false;
-  for (char c : name)
-    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.')) return false;
-  return true;
-}
 }  // namespace
 
 bool DisparityMapperParameters::isValid(std::string* why) const {
@@ -32,12 +24,9 @@ bool DisparityMapperParameters::isValid(std::string* why) const {
 }
 
 bool OctomapAccumulatorParameters::isValid(std::string* why) const {
-  if (!parametersInRange(*this, why)) return false;
-  if (!isPlainFileName(map_name))
-    return fail(why, "map_name must be a plain file name: letters, digits, '_', '-', '.', not starting with '.'");
+  if (!parametersInRange(*this, why) || !saving.isValid(why)) return false;
   if (!map_file.empty() && world_frame.empty()) return fail(why, "a map_file needs a world_frame (its frame)");
-  if (!(projection_min_z_m < projection_max_z_m)) return fail(why, "projection_min_z_m must be < projection_max_z_m");
-  return map.isValid(why);
+  return publisher.isValid(why) && map.isValid(why);
 }
 
 namespace {

@@ -346,12 +346,12 @@ TEST(Parameters, DefaultsAreValidAndBadValuesNameTheParameter) {
   OctomapAccumulatorParameters acc;
   EXPECT_TRUE(acc.isValid(&why)) << why;
   for (const char* escaping : {"../escape", "..", ".", "", ".hidden", "a b", "map\n"}) {
-    acc.map_name = escaping;
+    acc.saving.map_name = escaping;
     EXPECT_FALSE(acc.isValid(&why)) << "'" << escaping << "'";
     EXPECT_NE(why.find("map_name"), std::string::npos);
   }
   for (const char* plain : {"flight_2026-12-01", "map.v2", "M"}) {
-    acc.map_name = plain;
+    acc.saving.map_name = plain;
     EXPECT_TRUE(acc.isValid(&why)) << plain << ": " << why;
   }
   acc = OctomapAccumulatorParameters();
@@ -373,7 +373,7 @@ TEST(Parameters, FromNameValuePairs) {
   EXPECT_DOUBLE_EQ(accumulator.map.resolution_m, 0.5);  // a name both have sets both
   EXPECT_TRUE(mapper.use_depth);
   EXPECT_EQ(mapper.queue_size, 7);
-  EXPECT_EQ(accumulator.map_name, "flight");
+  EXPECT_EQ(accumulator.saving.map_name, "flight");
   mapper = DisparityMapperParameters();
   EXPECT_FALSE(loadParameters({{"resolution", "0.5"}}, &mapper, &accumulator, &why));
   EXPECT_NE(why.find("unknown parameter 'resolution'"), std::string::npos) << why;

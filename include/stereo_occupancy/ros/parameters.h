@@ -12,6 +12,8 @@
 
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/map_accumulator.h"
+#include "stereo_occupancy/ros/map_publisher.h"
+#include "stereo_occupancy/ros/map_saver.h"
 #include "stereo_occupancy/stereo_camera_model.h"
 
 namespace stereo_occupancy {
@@ -59,64 +61,36 @@ struct DisparityMapperParameters {
   bool isValid(std::string* why) const;
 };
 
-/// Parameters of the OctomapAccumulator nodelet.
+/// Parameters of the OctomapAccumulator nodelet: the map's, its outputs' and its saves'.
 struct OctomapAccumulatorParameters {
   /// The map's frame: updates in any other frame are refused; "": the first update's.
   std::string world_frame = "map";
   MapAccumulatorConfig map;
-  double publish_rate_hz = 1.0;  ///< rate of the map outputs, while subscribed [Hz]
-  /// The outputs that carry the whole live map (octomap_binary, octomap_full,
-  /// the point cloud, projected_map) go out at most this often; the markers
-  /// carry the changes at publish_rate_hz. 0: at publish_rate_hz too [s].
-  double full_map_period_s = 10.0;
-  /// Publish free_cells_vis_array (octomap_server's publish_free_space): the
-  /// free cells' markers cost more than all other outputs together.
-  bool publish_free_space = false;
+  MapPublisherConfig publisher;  ///< the map's outputs
+  MapSaverConfig saving;         ///< the map's files and database
   double prune_period_s = 5.0;   ///< how often cells beyond max_extent_m go to the database (or are dropped) [s]
-  /// Where ~save_map writes and the map is saved on shutdown, and where the
-  /// mission's database <map_name>.db lives; empty: nowhere (and cells beyond max_extent_m are dropped).
-  std::string save_dir;
-  std::string map_name = "stereo_occupancy_map";  ///< file base name in save_dir
-  /// Checkpoint this often: changed tiles to the database (or, without one, the map to its files); 0: never [s].
-  double save_period_s = 5.0;
   std::string map_file;  ///< a .bt or .ot to start from (octomap_server's map_file); empty: an empty map
-  /// The height band of projected_map (octomap_server's occupancy_min_z / occupancy_max_z) [m].
-  double projection_min_z_m = -10000.0;
-  double projection_max_z_m = 10000.0;
   int update_queue_size = 100;  ///< updates waiting for the fusion; more are lost (and counted)
 
-  /// The parameters (stereo_occupancy/parameter_table.h): f(spec, member) for each, the map's included.
+  /// The parameters (stereo_occupancy/parameter_table.h): f(spec, member) for each, the components' included.
   template <typename Self, typename F>
   static void forEachParameter(Self& p, F&& f) {
     f(textParameter("world_frame", "the map's frame; updates in another are refused; empty: the first update's"),
       p.world_frame);
     MapAccumulatorConfig::forEachParameter(p.map, f);
-    f(numberParameter("publish_rate_hz", "Hz", 0.01, 100.0, "rate of the map outputs, while subscribed"),
-      p.publish_rate_hz);
-    f(numberParameter("full_map_period_s", "s", 0.0, 3600.0,
-                      "the whole-map outputs go out at most this often; 0: at publish_rate_hz"),
-      p.full_map_period_s);
-    f(textParameter("publish_free_space", "publish free_cells_vis_array (octomap_server's publish_free_space)"),
-      p.publish_free_space);
+    MapPublisherConfig::forEachParameter(p.publisher, f);
     f(numberParameter("prune_period_s", "s", 0.1, 86400.0,
                       "how often cells beyond max_extent_m go to the database, or are dropped without one"),
       p.prune_period_s);
-    f(textParameter("save_dir", "~save_map, the shutdown save and the mission's database <map_name>.db; empty: nowhere"),
-      p.save_dir);
-    f(textParameter("map_name", "file base name in save_dir: a plain name"), p.map_name);
-    f(numberParameter("save_period_s", "s", 0.0, 86400.0, "checkpoint the changed tiles to the database this often; 0: never"),
-      p.save_period_s);
+    MapSaverConfig::forEachParameter(p.saving, f);
     f(textParameter("map_file", "a .bt or .ot to start from; empty: an empty map"), p.map_file);
-    f(numberParameter("projection_min_z_m", "m", -10000.0, 10000.0, "lowest height projected_map sees"),
-      p.projection_min_z_m);
-    f(numberParameter("projection_max_z_m", "m", -10000.0, 10000.0, "highest height projected_map sees"),
-      p.projection_max_z_m);
     f(numberParameter("update_queue_size", "updates", 1.0, 10000.0, "updates waiting for the fusion"),
       p.update_queue_size);
   }
 
-  /// The ranges of forEachParameter(), a plain map_name, a world frame for a
-  /// map_file, a projection band of positive height, a valid map config.
+  /// The ranges of forEachParameter(), a world frame for a map_file, and the
+  /// components' checks (a plain map_name, a projection band of positive
+  /// height, a valid map config).
   bool isValid(std::string* why) const;
 };
 
