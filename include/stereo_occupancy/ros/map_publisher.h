@@ -8,8 +8,8 @@
 #include <ros/publisher.h>
 #include <ros/service_server.h>
 #include <ros/single_subscriber_publisher.h>
+#include <ros/time.h>
 #include <ros/timer.h>
-#include <ros/wall_timer.h>
 #include <std_msgs/Header.h>
 #include <visualization_msgs/MarkerArray.h>
 

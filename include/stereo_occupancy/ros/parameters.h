@@ -1,7 +1,8 @@
 #pragma once
 /// @file
 /// The one place that reads the parameter server: one struct per nodelet,
-/// built from core config structs, validated on load.
+/// built from its components' config structs (the core's, MapPublisherConfig,
+/// MapSaverConfig), validated on load.
 
 #include <dynamic_reconfigure/Config.h>
 #include <ros/node_handle.h>
