@@ -137,8 +137,8 @@ inline void AccumulatingOcTree::LeafUpdater::add(const octomap::OcTreeKey& key, 
   // fixed by each key component's d highest bits.
   int depth = floor_depth_;
   if (known_depth_ > floor_depth_) {
-    const unsigned differ = static_cast<unsigned>((key[0] ^ previous_[0]) | (key[1] ^ previous_[1]) |
-                                                  (key[2] ^ previous_[2]));
+    const unsigned differ =
+        static_cast<unsigned>((key[0] ^ previous_[0]) | (key[1] ^ previous_[1]) | (key[2] ^ previous_[2]));
     depth = differ == 0 ? leaf_depth : leaf_depth - 1 - (31 - __builtin_clz(differ));
     if (depth > known_depth_) depth = known_depth_;
   }

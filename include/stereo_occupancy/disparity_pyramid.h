@@ -170,8 +170,8 @@ class DisparityBlockBound {
   float far_disparity_;
   float bins_per_px_;
   std::vector<float> max_d_max_;  ///< per bin [k, k+1) / bins_per_px of d_min, conservative over the bin
-  float bf_;                       ///< b·f [px·m]
-  float c_;                        ///< cell size [m]
+  float bf_;                      ///< b·f [px·m]
+  float c_;                       ///< cell size [m]
 };
 
 }  // namespace stereo_occupancy

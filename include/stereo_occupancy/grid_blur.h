@@ -134,9 +134,9 @@ class DistanceDependentBlur {
   std::vector<float> weights_;  ///< per q: its kernel padded with zeros to radius_
   /// Rows' extents of non-zero values: the input, after x, after y, after z.
   std::vector<Extent> extent_[4];
-  std::vector<KernelRun> runs_;     ///< per row, over its final extent
-  std::vector<uint32_t> row_runs_;  ///< row r's runs are runs_[row_runs_[r] .. row_runs_[r + 1])
-  std::vector<double> thresholds_;  ///< per q: the smallest r² whose rounded σ is q [m²]
+  std::vector<KernelRun> runs_;              ///< per row, over its final extent
+  std::vector<uint32_t> row_runs_;           ///< row r's runs are runs_[row_runs_[r] .. row_runs_[r + 1])
+  std::vector<double> thresholds_;           ///< per q: the smallest r² whose rounded σ is q [m²]
   std::vector<std::vector<float>> scratch_;  ///< a row's input, per worker
   std::vector<float> buffer_a_;
   std::vector<float> buffer_b_;

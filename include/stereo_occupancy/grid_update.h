@@ -100,11 +100,17 @@ struct GridUpdate {
   size_t numCells() const { return log_odds.size(); }
   bool isConsistent(std::string* why = nullptr) const { return GridUpdateView(*this).isConsistent(why); }
   template <typename F>
-  void forEachCell(F&& f) const { GridUpdateView(*this).forEachCell(std::forward<F>(f)); }
+  void forEachCell(F&& f) const {
+    GridUpdateView(*this).forEachCell(std::forward<F>(f));
+  }
   template <typename F>
-  void forEachCellBySiblings(F&& f) const { GridUpdateView(*this).forEachCellBySiblings(std::forward<F>(f)); }
+  void forEachCellBySiblings(F&& f) const {
+    GridUpdateView(*this).forEachCellBySiblings(std::forward<F>(f));
+  }
   template <typename F>
-  void forEachSiblingBlock(F&& f) const { GridUpdateView(*this).forEachSiblingBlock(std::forward<F>(f)); }
+  void forEachSiblingBlock(F&& f) const {
+    GridUpdateView(*this).forEachSiblingBlock(std::forward<F>(f));
+  }
 };
 
 inline GridUpdateView::GridUpdateView(const GridUpdate& update)
@@ -179,7 +185,7 @@ void GridUpdateView::forEachSiblingBlock(F&& f) const {
   std::vector<float> rows[4];  // q = dy + 2 dz: one cluster's four rows, NaN where no cell
   // A strip: the four rows (y0 + dy, z0 + dz) of one line of blocks; its
   // segments per row are the ranges [begin[q], end[q]) of `segments`.
-  auto visitStrip = [&](int64_t y0, int64_t z0, const size_t (&begin)[4], const size_t (&end)[4]) {
+  auto visitStrip = [&](int64_t y0, int64_t z0, const size_t(&begin)[4], const size_t(&end)[4]) {
     size_t next[4] = {begin[0], begin[1], begin[2], begin[3]};
     for (;;) {
       // A cluster: the segments whose blocks overlap, in x order; rows[q] spans it.
@@ -201,7 +207,8 @@ void GridUpdateView::forEachSiblingBlock(F&& f) const {
         if (first[q] == last[q]) continue;
         rows[q].assign(width, std::numeric_limits<float>::quiet_NaN());
         for (size_t k = first[q]; k < last[q]; ++k)
-          std::copy(log_odds.begin() + segments[k].v, log_odds.begin() + segments[k].v + (segments[k].x1 - segments[k].x0),
+          std::copy(log_odds.begin() + segments[k].v,
+                    log_odds.begin() + segments[k].v + (segments[k].x1 - segments[k].x0),
                     rows[q].begin() + (segments[k].x0 - xs));
         next[q] = last[q];
       }

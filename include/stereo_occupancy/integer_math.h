@@ -24,7 +24,7 @@ inline int ceilToInt(double x) {
 
 /// std::llround(x) (halves away from zero), for |x| < 2^52.
 inline int64_t roundToInt64(double x) {
-  const int64_t i = static_cast<int64_t>(x);  // truncates towards zero
+  const int64_t i = static_cast<int64_t>(x);           // truncates towards zero
   const double fraction = x - static_cast<double>(i);  // exact for |x| < 2^52
   return i + (fraction >= 0.5) - (fraction <= -0.5);
 }

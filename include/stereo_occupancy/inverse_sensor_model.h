@@ -150,8 +150,7 @@ class InverseSensorModel {
   double logOddsHat(double l_m, double l_p_m, double delta_l_m, double cell_size_m) const;
 
   /// Eq. 11 by dense sampling of the window with @p samples points.
-  double logOddsHatSampled(double l_m, double l_p_m, double delta_l_m, double cell_size_m,
-                           int samples = 10001) const;
+  double logOddsHatSampled(double l_m, double l_p_m, double delta_l_m, double cell_size_m, int samples = 10001) const;
 
   /// Log-odds of free space, ln(p / (1 - p)) of p_min (p_free for kSurface).
   double freeLogOdds() const {
@@ -166,9 +165,9 @@ class InverseSensorModel {
 /// L̂ along one ray, as served by LogOddsTable: a view into two table rows.
 /// Cheap to copy; valid while the table lives.
 struct RangeProfile {
-  const float* row = nullptr;  ///< row of the peak probability just below this measurement's
-  int row_length = 0;          ///< offset to the next row (just above)
-  float row_weight = 0.0f;     ///< interpolation weight of the next row
+  const float* row = nullptr;                            ///< row of the peak probability just below this measurement's
+  int row_length = 0;                                    ///< offset to the next row (just above)
+  float row_weight = 0.0f;                               ///< interpolation weight of the next row
   float l_p_m = std::numeric_limits<float>::infinity();  ///< measured range (inf: free to max range)
   float samples_per_m = 0.0f;                            ///< table samples per metre of offset
   float half_cell_m = 0.0f;
@@ -280,8 +279,8 @@ class LogOddsTable {
   double cell_size_m_;
   float tail_sigmas_;  ///< InverseSensorModelConfig::tail_sigmas, at most kTailSigmas
   float k_over_sqrt_2pi_;
-  float peak_max_;        ///< p_max - 0.5
-  float rows_per_peak_;   ///< (kPeakRows - 1) / (p_max - 0.5)
+  float peak_max_;       ///< p_max - 0.5
+  float rows_per_peak_;  ///< (kPeakRows - 1) / (p_max - 0.5)
   int row_length_;
   float free_log_odds_;
   float hit_log_odds_;  ///< RangeProfile::hit_log_odds
@@ -292,9 +291,7 @@ class LogOddsTable {
 /// True if disparity @p d_px measures a range; false for zero and for a
 /// positive one whose depth lies beyond a thousand times the maximum range
 /// (its Δl would overflow): such a pixel sees free space to the range.
-inline bool measuresRange(const StereoCameraModel& camera, float d_px) {
-  return d_px > 1e-3 * camera.farDisparity();
-}
+inline bool measuresRange(const StereoCameraModel& camera, float d_px) { return d_px > 1e-3 * camera.farDisparity(); }
 
 /// A measurement along its ray: range l_p and its uncertainty Δl.
 struct MeasuredRange {
@@ -305,15 +302,14 @@ struct MeasuredRange {
 /// The range of disparity d > 0 (measuresRange() holds) along a ray with
 /// @p ray_norm = |p_c| / z_c (eq. 2: the norm of (x - c_x, y - c_y, f) / f).
 inline MeasuredRange measuredRange(const StereoCameraModel& camera, double ray_norm, float d_px) {
-  const double z = camera.depthFromDisparity(d_px);  // eq. 1
-  const double l_p = z * ray_norm;                   // eqs. 2, 6
+  const double z = camera.depthFromDisparity(d_px);                                       // eq. 1
+  const double l_p = z * ray_norm;                                                        // eqs. 2, 6
   return {static_cast<float>(l_p), static_cast<float>(camera.rangeUncertainty(z, l_p))};  // eqs. 4, 7
 }
 
 /// The profile of L̂ along a pixel's ray for a disparity d > 0 for which
 /// measuresRange() holds; @p ray_norm as for measuredRange().
-RangeProfile measuredProfile(const StereoCameraModel& camera, const LogOddsTable& table, double ray_norm,
-                             float d_px);
+RangeProfile measuredProfile(const StereoCameraModel& camera, const LogOddsTable& table, double ray_norm, float d_px);
 
 /// measuredProfile()'s l_p_m + front_m alone (LogOddsTable::frontRange()).
 inline float measuredFrontRange(const StereoCameraModel& camera, const LogOddsTable& table, double ray_norm,

@@ -82,8 +82,7 @@ class LineDrawer {
   static constexpr int kPartsPerWorker = 16;
 
   /// Section V-A: one line per valid pixel of a CV_32FC1 disparity image.
-  void drawImage(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
-                 DrawStatistics* stats);
+  void drawImage(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C, LocalGrid* grid, DrawStatistics* stats);
 
   /// Section VI-B: recursive descent through a min-disparity pyramid (eq. 14)
   /// from its top level; a pixel is drawn at level i when its disparity's
@@ -129,11 +128,11 @@ class LineDrawer {
   /// camera centre in the grid's cell units, its cells and the range limit.
   /// Built once per image, not once per line.
   struct RayGrid {
-    Eigen::Vector3d g0;  ///< line origin relative to the grid's lower corner [cells]
-    Eigen::Vector3d W_origin;    ///< the camera centre [m]
+    Eigen::Vector3d g0;            ///< line origin relative to the grid's lower corner [cells]
+    Eigen::Vector3d W_origin;      ///< the camera centre [m]
     Eigen::Vector3i origin_index;  ///< global index of the grid's first cell
-    double c = 0.0;      ///< cell size [m]
-    double inv_c = 0.0;  ///< 1 / c [1/m]
+    double c = 0.0;                ///< cell size [m]
+    double inv_c = 0.0;            ///< 1 / c [1/m]
     double max_range_m = 0.0;
     Eigen::Vector3i size;
     int64_t stride[3] = {0, 0, 0};  ///< index steps along x, y, z
@@ -233,8 +232,8 @@ class LineDrawer {
   SimdLevel simd_;
   bool surface_spans_ = true;
   WorkerPool* pool_ = nullptr;
-  std::vector<std::vector<float>> worker_grids_;  ///< worker w >= 1 draws into [w - 1]; kUnknown between images
-  std::vector<uint8_t> hit_blocks_;               ///< hitBlocks()
+  std::vector<std::vector<float>> worker_grids_;         ///< worker w >= 1 draws into [w - 1]; kUnknown between images
+  std::vector<uint8_t> hit_blocks_;                      ///< hitBlocks()
   std::vector<std::vector<uint8_t>> worker_hit_blocks_;  ///< worker w >= 1 flags its hits' blocks in [w - 1]
 };
 

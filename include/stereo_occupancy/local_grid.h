@@ -64,7 +64,8 @@ class LocalGrid {
   size_t numBlocks() const { return static_cast<size_t>(blocksPerRow()) * size_.y() * size_.z(); }
 
   size_t linearIndex(int x, int y, int z) const {
-    return static_cast<size_t>(x) + static_cast<size_t>(size_.x()) * (static_cast<size_t>(y) + static_cast<size_t>(size_.y()) * z);
+    return static_cast<size_t>(x) +
+           static_cast<size_t>(size_.x()) * (static_cast<size_t>(y) + static_cast<size_t>(size_.y()) * z);
   }
   bool contains(const Eigen::Vector3i& local) const {
     return (local.array() >= 0).all() && (local.array() < size_.array()).all();

@@ -22,9 +22,9 @@ class AccumulatingOcTree;
 
 /// Parameters of the global map.
 struct MapAccumulatorConfig {
-  double resolution_m = 0.25;        ///< cell edge; updates at another resolution are refused [m]
-  double clamping_min_prob = 0.12;   ///< lower clamping bound of a cell (probability)
-  double clamping_max_prob = 0.97;   ///< upper clamping bound of a cell (probability)
+  double resolution_m = 0.25;             ///< cell edge; updates at another resolution are refused [m]
+  double clamping_min_prob = 0.12;        ///< lower clamping bound of a cell (probability)
+  double clamping_max_prob = 0.97;        ///< upper clamping bound of a cell (probability)
   double occupancy_threshold_prob = 0.5;  ///< cells above it are occupied (probability)
   /// Half edge of the box around the vehicle's recent positions that the
   /// live map keeps; cells outside it are dropped on prune() (or moved to a
@@ -194,9 +194,9 @@ class MapAccumulator {
   /// bounds), cut to the extent by prune() [m].
   Eigen::AlignedBox3d W_extent_;
   std::vector<Eigen::Vector3d> W_recent_origins_;  ///< ring of the last kPruneOrigins sensor origins
-  size_t next_origin_ = 0;                          ///< where the next one goes in the ring
+  size_t next_origin_ = 0;                         ///< where the next one goes in the ring
   size_t updates_ = 0;
-  mutable bool inner_stale_ = false;  ///< inner nodes lag the leaves until tree() is called
+  mutable bool inner_stale_ = false;             ///< inner nodes lag the leaves until tree() is called
   std::unordered_set<uint64_t> changed_blocks_;  ///< packed BlockIndex of the blocks changed
   std::unordered_set<uint64_t> dirty_tiles_;     ///< packed TileIndex of the tiles changed
   bool all_dirty_ = false;                       ///< every tile changed (load)

@@ -40,8 +40,7 @@ OcTreeDataShape checkOcTreeData(const char* data, size_t size, OcTreeEncoding en
 
 /// Reads @p bytes (checked by checkOcTreeData) into a new tree of
 /// @p resolution_m cells. @throws std::runtime_error if they are not one whole tree.
-std::unique_ptr<octomap::OcTree> readOcTreeData(const std::string& bytes, OcTreeEncoding encoding,
-                                                double resolution_m);
+std::unique_ptr<octomap::OcTree> readOcTreeData(const std::string& bytes, OcTreeEncoding encoding, double resolution_m);
 
 /// Reads a map file of an OcTree, .bt or .ot (told by its first line, as
 /// OctoMap writes it), checking it before OctoMap's reader sees it: its

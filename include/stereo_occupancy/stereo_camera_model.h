@@ -40,8 +40,9 @@ struct StereoCameraConfig {
 
 /// What the pixels of one disparity image hold: why an image may map nothing.
 struct DisparityCensus {
-  uint64_t no_match = 0;      ///< NaN, infinite or negative: the matcher found nothing
-  uint64_t out_of_range = 0;  ///< outside [min_disparity_px, nearDisparity()]: the search range, or nearer than min_range_m
+  uint64_t no_match = 0;  ///< NaN, infinite or negative: the matcher found nothing
+  uint64_t out_of_range =
+      0;  ///< outside [min_disparity_px, nearDisparity()]: the search range, or nearer than min_range_m
   uint64_t beyond_range = 0;  ///< 0 < d < farDisparity(): beyond max_range_m (free space up to it)
   uint64_t sky = 0;           ///< 0: infinitely far (free space up to max_range_m)
   uint64_t measured = 0;      ///< a range within [min_range_m, max_range_m]
@@ -117,7 +118,7 @@ class StereoCameraModel {
   StereoCameraConfig config_;
   double bf_;
   double inv_f_;
-  double delta_d_over_bf_;  ///< Δd / (b f) [1/m]
+  double delta_d_over_bf_;   ///< Δd / (b f) [1/m]
   double far_disparity_px_;  ///< b f / max_range_m, asked once per line drawn
   float min_valid_;
   float max_valid_;

@@ -69,9 +69,9 @@ class WorkerPool {
   std::mutex mutex_;
   std::condition_variable start_, done_;
   const std::function<void(size_t, unsigned)>* task_ = nullptr;
-  size_t n_ = 0, next_ = 0;  ///< the job's parts; the next one to hand out
+  size_t n_ = 0, next_ = 0;              ///< the job's parts; the next one to hand out
   std::atomic<unsigned> generation_{0};  ///< counts jobs: a worker joins each one once; written under mutex_
-  std::atomic<unsigned> busy_{0};  ///< workers still in the current job; written under mutex_
+  std::atomic<unsigned> busy_{0};        ///< workers still in the current job; written under mutex_
   std::atomic<bool> stop_{false};
   std::exception_ptr error_;
 };

@@ -51,7 +51,6 @@ int main(int argc, char** argv) {
     drawer.prepareGrid(T_W_C, &grid);
     cells += drawer.drawInto(image, T_W_C, &grid).grid_cells_drawn;
   }
-  std::printf("%s %s: %d frames, %llu cells drawn\n", argv[1], argv[2], frames,
-              static_cast<unsigned long long>(cells));
+  std::printf("%s %s: %d frames, %llu cells drawn\n", argv[1], argv[2], frames, static_cast<unsigned long long>(cells));
   return 0;
 }

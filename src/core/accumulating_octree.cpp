@@ -36,7 +36,7 @@ bool AccumulatingOcTree::dropNode(const octomap::OcTreeKey& key, unsigned depth)
     const unsigned pos = octomap::computeChildIdx(key, static_cast<int>(tree_depth - 1 - d));
     if (!nodeChildExists(path[d], pos)) {
       if (nodeHasChildren(path[d])) return false;  // nothing there
-      expandNode(path[d]);                        // a coarse leaf: keep its other parts
+      expandNode(path[d]);                         // a coarse leaf: keep its other parts
     }
     path[d + 1] = getNodeChild(path[d], pos);
   }

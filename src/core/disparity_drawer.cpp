@@ -39,10 +39,12 @@ const char* toString(DrawingAlgorithm algorithm) {
 }
 
 const std::vector<DrawingAlgorithm>& allDrawingAlgorithms() {
-  static const std::vector<DrawingAlgorithm> all = {
-      DrawingAlgorithm::kLine,           DrawingAlgorithm::kLinePyramid,
-      DrawingAlgorithm::kRayTrace,       DrawingAlgorithm::kRayTracePyramid,
-      DrawingAlgorithm::kLinePyramidBounded, DrawingAlgorithm::kRayTracePyramidBounded};
+  static const std::vector<DrawingAlgorithm> all = {DrawingAlgorithm::kLine,
+                                                    DrawingAlgorithm::kLinePyramid,
+                                                    DrawingAlgorithm::kRayTrace,
+                                                    DrawingAlgorithm::kRayTracePyramid,
+                                                    DrawingAlgorithm::kLinePyramidBounded,
+                                                    DrawingAlgorithm::kRayTracePyramidBounded};
   return all;
 }
 
@@ -93,18 +95,18 @@ DisparityDrawer::DisparityDrawer(const StereoCameraConfig& camera, const Drawing
     blur_.setWorkers(workers_.get());
   }
   line_drawer_.setSurfaceSpans(config_.surface_spans);
-  const bool draws_pyramid_lines = config_.algorithm == DrawingAlgorithm::kLinePyramid ||
-                                   config_.algorithm == DrawingAlgorithm::kLinePyramidBounded;
+  const bool draws_pyramid_lines =
+      config_.algorithm == DrawingAlgorithm::kLinePyramid || config_.algorithm == DrawingAlgorithm::kLinePyramidBounded;
   if (draws_pyramid_lines && levels_.minLevel() < PyramidLevelTable::kLowestLevel) {
     // Eq. 13 at the maximum range needs c >= 2^i·z/f; at i = kLowestLevel:
-    const double finest_m = std::ldexp(camera_.config().max_range_m / camera_.config().focal_length_px,
-                                       PyramidLevelTable::kLowestLevel);
-    throw std::invalid_argument("drawing: resolution_m = " + std::to_string(config_.resolution_m) +
-                                " is too fine for this camera at max_range_m = " +
-                                std::to_string(camera_.config().max_range_m) + ": it would draw 4^" +
-                                std::to_string(-levels_.minLevel()) + " lines per pixel (eq. 15, level " +
-                                std::to_string(levels_.minLevel()) + "); raise resolution_m to at least " +
-                                std::to_string(finest_m) + " m or lower max_range_m");
+    const double finest_m =
+        std::ldexp(camera_.config().max_range_m / camera_.config().focal_length_px, PyramidLevelTable::kLowestLevel);
+    throw std::invalid_argument(
+        "drawing: resolution_m = " + std::to_string(config_.resolution_m) +
+        " is too fine for this camera at max_range_m = " + std::to_string(camera_.config().max_range_m) +
+        ": it would draw 4^" + std::to_string(-levels_.minLevel()) + " lines per pixel (eq. 15, level " +
+        std::to_string(levels_.minLevel()) + "); raise resolution_m to at least " + std::to_string(finest_m) +
+        " m or lower max_range_m");
   }
   if (config_.algorithm == DrawingAlgorithm::kLinePyramidBounded ||
       config_.algorithm == DrawingAlgorithm::kRayTracePyramidBounded)
@@ -146,8 +148,7 @@ void DisparityDrawer::prepareGrid(const Eigen::Isometry3d& T_W_C, LocalGrid* gri
   fitGridToBox(box, config_.resolution_m, padding, grid, workers_.get());
 }
 
-DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C,
-                                         LocalGrid* grid) {
+DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C, LocalGrid* grid) {
   checkInput(disparity, T_W_C);
   DrawStatistics stats;
   switch (config_.algorithm) {
@@ -159,7 +160,8 @@ DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::
       line_drawer_.drawPyramid(min_pyramid_, T_W_C, grid, &stats);
       break;
     case DrawingAlgorithm::kRayTrace:
-      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, 0, workers_.get());  // level 0: the image as is
+      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, 0,
+                         workers_.get());  // level 0: the image as is
       ray_tracer_.drawImage(max_pyramid_, T_W_C, grid, &stats);
       break;
     case DrawingAlgorithm::kRayTracePyramid:

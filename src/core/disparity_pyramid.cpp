@@ -83,7 +83,8 @@ template <typename Reduction>
 #if defined(__GNUC__)
 __attribute__((always_inline))  // out of line, the lanes went through memory
 #endif
-inline void reduceLanes(const __m128 (&ok)[4], const __m128 (&valid_d)[4], __m128 invalid, const RowPair& r, int x) {
+inline void
+reduceLanes(const __m128 (&ok)[4], const __m128 (&valid_d)[4], __m128 invalid, const RowPair& r, int x) {
   __m128 v[4];
   for (int k = 0; k < 4; ++k) v[k] = _mm_or_ps(valid_d[k], _mm_andnot_ps(ok[k], invalid));
   _mm_storeu_ps(r.s0 + 2 * x, v[0]);
@@ -194,8 +195,8 @@ void inRowBands(int rows, WorkerPool* pool, const Part& part) {
 
 }  // namespace
 
-void DisparityPyramid::build(const cv::Mat& disparity, const StereoCameraModel& camera, PyramidType type,
-                             int top_level, WorkerPool* pool) {
+void DisparityPyramid::build(const cv::Mat& disparity, const StereoCameraModel& camera, PyramidType type, int top_level,
+                             WorkerPool* pool) {
   if (type == PyramidType::kMinDisparity)
     buildPyramids(disparity, camera, top_level, this, nullptr, pool);
   else
@@ -251,13 +252,11 @@ PyramidLevelTable::PyramidLevelTable(const StereoCameraModel& camera, double cel
   // underflows to 0 (ilogb(0) = INT_MIN).
   constexpr int kMostEnlargements = 16;
   min_level_ = std::clamp(std::ilogb(far_disparity_ * c_over_b_), -kMostEnlargements, 0);
-  const int size_limit =
-      std::ilogb(static_cast<double>(std::max(camera.config().width_px, camera.config().height_px)));
+  const int size_limit = std::ilogb(static_cast<double>(std::max(camera.config().width_px, camera.config().height_px)));
   // The nearest range, not the message's search range: drawing the same scene
   // from a disparity and from a depth camera starts from the same level.
   const double near = camera.bf() / camera.config().min_range_m;
-  const int near_level = std::isfinite(near) ? std::ilogb(near * cell_size_m / camera.config().baseline_m)
-                                             : size_limit;
+  const int near_level = std::isfinite(near) ? std::ilogb(near * cell_size_m / camera.config().baseline_m) : size_limit;
   top_level_ = std::max(0, std::min(near_level, size_limit));
 }
 

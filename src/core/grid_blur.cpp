@@ -104,7 +104,7 @@ float knownValue(float v) { return v == LocalGrid::kUnknown ? 0.0f : v; }
 }  // namespace
 
 int DistanceDependentBlur::SigmaIndex::operator()(double r2) const {
-  const double steps = std::sqrt(trans2 + r2 * angle2) * to_steps;  // eq. 17, in sigma_step_cells steps
+  const double steps = std::sqrt(trans2 + r2 * angle2) * to_steps;        // eq. 17, in sigma_step_cells steps
   return steps >= max_steps ? max_steps : static_cast<int>(steps + 0.5);  // round half up, as lround
 }
 
@@ -118,8 +118,7 @@ void DistanceDependentBlur::apply(const Eigen::Vector3d& W_camera, LocalGrid* gr
   const CameraDistances distances = cameraDistances(*grid, W_camera);
   const double c = grid->resolution();
   const SigmaIndex sigma_index{config_.sigma_trans_m * config_.sigma_trans_m,
-                               config_.sigma_angle_rad * config_.sigma_angle_rad,
-                               1.0 / (c * config_.sigma_step_cells),
+                               config_.sigma_angle_rad * config_.sigma_angle_rad, 1.0 / (c * config_.sigma_step_cells),
                                static_cast<int>(BlurConfig::kMaxSigmaCells / config_.sigma_step_cells)};
   const int q_max = sigma_index(distances.r2_max);
   prepareWeights(q_max);
@@ -145,7 +144,8 @@ bool DistanceDependentBlur::findInputExtents(const LocalGrid& grid) {
       while (lo < nx && knownValue(row[lo]) == 0.0f) ++lo;
       if (lo == nx) continue;
       int hi = nx;
-      while (hi - kInformationBlock >= lo && !blockHasInformation(row + hi - kInformationBlock)) hi -= kInformationBlock;
+      while (hi - kInformationBlock >= lo && !blockHasInformation(row + hi - kInformationBlock))
+        hi -= kInformationBlock;
       while (hi > lo && knownValue(row[hi - 1]) == 0.0f) --hi;
       e0[r] = Extent{lo, hi};
       mine = true;
@@ -156,7 +156,7 @@ bool DistanceDependentBlur::findInputExtents(const LocalGrid& grid) {
 }
 
 DistanceDependentBlur::CameraDistances DistanceDependentBlur::cameraDistances(const LocalGrid& grid,
-                                                                             const Eigen::Vector3d& W_camera) {
+                                                                              const Eigen::Vector3d& W_camera) {
   // r² = the sum of the per-axis squares; largest at the box corner farthest from the camera.
   CameraDistances d;
   for (int a = 0; a < 3; ++a) {
@@ -211,8 +211,7 @@ void DistanceDependentBlur::growExtents(const LocalGrid& grid) {
 }
 
 void DistanceDependentBlur::findKernelRuns(const LocalGrid& grid, const Eigen::Vector3d& W_camera,
-                                           const CameraDistances& distances, const SigmaIndex& sigma_index,
-                                           int q_max) {
+                                           const CameraDistances& distances, const SigmaIndex& sigma_index, int q_max) {
   // Runs of one kernel over each row's final extent (which holds the others).
   // q grows with r², and along a row r² falls up to the camera's x and grows
   // after it: the runs' ends are found by bisection against the smallest r²

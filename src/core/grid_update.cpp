@@ -27,8 +27,9 @@ bool GridUpdateView::isConsistent(std::string* why) const {
     if (end > cells) return fail("a run ends outside the grid");
     total += run_length[k];
   }
-  if (total != log_odds.size()) return fail("the runs cover " + std::to_string(total) + " cells but " +
-                                            std::to_string(log_odds.size()) + " values came");
+  if (total != log_odds.size())
+    return fail("the runs cover " + std::to_string(total) + " cells but " + std::to_string(log_odds.size()) +
+                " values came");
   // Finite: the exponent bits not all set. One pass without an early exit (vectorisable).
   uint32_t not_finite = 0;
   for (float v : log_odds) {

@@ -15,9 +15,12 @@ constexpr double kSqrt2Pi = 2.5066282746310002;
 const char* toString(SensorProfile profile) { return profile == SensorProfile::kSurface ? "surface" : "gaussian"; }
 
 bool parseSensorProfile(const std::string& name, SensorProfile* profile) {
-  if (name == "gaussian") *profile = SensorProfile::kGaussian;
-  else if (name == "surface") *profile = SensorProfile::kSurface;
-  else return false;
+  if (name == "gaussian")
+    *profile = SensorProfile::kGaussian;
+  else if (name == "surface")
+    *profile = SensorProfile::kSurface;
+  else
+    return false;
   return true;
 }
 
@@ -83,8 +86,8 @@ LogOddsTable::LogOddsTable(const InverseSensorModel& model, double cell_size_m)
   const int samples = static_cast<int>((kFrontSigmas + kTailSigmas) * kSamplesPerSigma);
   row_length_ = samples + 2;  // one sample of padding for the interpolation at the tail
   free_log_odds_ = static_cast<float>(model.freeLogOdds());
-  hit_log_odds_ = cfg.profile == SensorProfile::kSurface ? static_cast<float>(std::log(cfg.p_hit / (1.0 - cfg.p_hit)))
-                                                         : 0.0f;
+  hit_log_odds_ =
+      cfg.profile == SensorProfile::kSurface ? static_cast<float>(std::log(cfg.p_hit / (1.0 - cfg.p_hit))) : 0.0f;
   sky_log_odds_ = cfg.profile == SensorProfile::kSurface
                       ? std::nextafter(static_cast<float>(std::log(cfg.p_sky / (1.0 - cfg.p_sky))),
                                        -std::numeric_limits<float>::infinity())
@@ -101,9 +104,9 @@ LogOddsTable::LogOddsTable(const InverseSensorModel& model, double cell_size_m)
         row[j] = static_cast<float>(std::log(p / (1.0 - p)));
         continue;
       }
-      const double p_occ = t <= 0.0 ? cfg.p_min : 0.5;                             // eq. 10
-      const double p = p_occ + (peak - p_occ) * std::exp(-0.5 * t * t);           // eq. 9
-      row[j] = static_cast<float>(std::log(p / (1.0 - p)));                        // eq. 8
+      const double p_occ = t <= 0.0 ? cfg.p_min : 0.5;                   // eq. 10
+      const double p = p_occ + (peak - p_occ) * std::exp(-0.5 * t * t);  // eq. 9
+      row[j] = static_cast<float>(std::log(p / (1.0 - p)));              // eq. 8
     }
   }
 }
@@ -138,8 +141,7 @@ RangeProfile LogOddsTable::freeProfile() const {
   return p;
 }
 
-RangeProfile measuredProfile(const StereoCameraModel& camera, const LogOddsTable& table, double ray_norm,
-                             float d_px) {
+RangeProfile measuredProfile(const StereoCameraModel& camera, const LogOddsTable& table, double ray_norm, float d_px) {
   const MeasuredRange m = measuredRange(camera, ray_norm, d_px);
   return table.profile(m.l_p_m, m.delta_l_m);
 }

@@ -57,12 +57,12 @@ inline void drawCell(float* data, int64_t index, float value) {
 /// t are in cells along the ray.
 struct LineWalk {
   int major = 0, minor_a = 1, minor_b = 2;  ///< axes
-  int first_slab = 0;   ///< index along the major axis of the first slab
-  int slabs = 0;        ///< slabs crossed, both ends included
-  int step = 1;         ///< +1 or -1 along the major axis
-  double t_begin = 0.0, t_end = 0.0;  ///< the segment drawn
-  double t_first = 0.0;  ///< at the first slab's centre plane; |t_first - t_begin| <= dt / 2
-  double dt = 0.0;       ///< from one slab's centre plane to the next
+  int first_slab = 0;                       ///< index along the major axis of the first slab
+  int slabs = 0;                            ///< slabs crossed, both ends included
+  int step = 1;                             ///< +1 or -1 along the major axis
+  double t_begin = 0.0, t_end = 0.0;        ///< the segment drawn
+  double t_first = 0.0;                     ///< at the first slab's centre plane; |t_first - t_begin| <= dt / 2
+  double dt = 0.0;                          ///< from one slab's centre plane to the next
   /// Both ends inside the grid (the usual case: the grid covers the
   /// frustum), so the whole segment is and no index needs a check.
   bool inside = true;
@@ -121,8 +121,7 @@ int freeRunNeon(float* data, int k, int k_end, float free_value, LineCursor* r) 
   for (; k + 1 < k_end; k += 2) {
     // {a_k, a_k+1, b_k, b_k+1}: the high halves of the positions.
     const uint32x4_t cells = vuzp2q_u32(vreinterpretq_u32_s64(va), vreinterpretq_u32_s64(vb));
-    const uint64x2_t idx =
-        vmlal_high_u32(vmlal_u32(vreinterpretq_u64_s64(vm), vget_low_u32(cells), vsa), cells, vsb);
+    const uint64x2_t idx = vmlal_high_u32(vmlal_u32(vreinterpretq_u64_s64(vm), vget_low_u32(cells), vsa), cells, vsb);
     float* c0 = data + static_cast<int64_t>(vgetq_lane_u64(idx, 0));
     float* c1 = data + static_cast<int64_t>(vgetq_lane_u64(idx, 1));
     *c0 = std::max(*c0, free_value);  // obstacle priority (section V-A, step 2b)
@@ -293,8 +292,8 @@ STEREO_OCCUPANCY_INLINE uint64_t drawHitAt(const Grid& g, const Eigen::Vector3d&
 /// along the cube's), and the centre plane's cell is not always the point's.
 /// Returns the cells written (0 or 1).
 template <class Grid>
-STEREO_OCCUPANCY_INLINE uint64_t drawPointHit(const Grid& g, const Eigen::Vector3d& W_dir,
-                                              const RangeProfile& profile, double l_begin, double l_stop) {
+STEREO_OCCUPANCY_INLINE uint64_t drawPointHit(const Grid& g, const Eigen::Vector3d& W_dir, const RangeProfile& profile,
+                                              double l_begin, double l_stop) {
   const double l_p = profile.l_p_m;
   if (!profile.hasPointHit() || !(l_p >= l_begin && l_p <= l_stop)) return 0;
   return drawHitAt(g, g.W_origin + W_dir * l_p, profile.hit_log_odds);
@@ -778,7 +777,7 @@ void LineDrawer::mergeWorkerGrids(const std::vector<PerWorker<char>>& used, Loca
         if (block_end - i == kBlock && !blockHasKnown(other + i)) continue;
         for (size_t j = i; j < block_end; ++j) {
           cells[j] = std::max(cells[j], other[j]);  // obstacle priority, as drawCell
-          other[j] = LocalGrid::kUnknown;            // ready for the next image
+          other[j] = LocalGrid::kUnknown;           // ready for the next image
         }
       }
     }
@@ -835,7 +834,7 @@ Eigen::Vector3d LineDrawer::blockRay(int level, int x, int y) const {
 
 uint64_t LineDrawer::drawPixel(const Descent& s, int level, int x, int y, float d_px, double z_begin) const {
   const Eigen::Vector3d C_ray = blockRay(level, x, y);  // z = 1
-  const double norm = C_ray.norm();                             // |p_c| / z_c (eq. 2)
+  const double norm = C_ray.norm();                     // |p_c| / z_c (eq. 2)
   const RangeProfile profile = profileOf(s, norm, d_px);
   const uint64_t written = drawLine(s.grid, s.T_W_C.linear() * (C_ray / norm), profile, z_begin * norm,
                                     std::numeric_limits<double>::infinity());
@@ -970,8 +969,8 @@ void LineDrawer::drawSpan(const Descent& s, int level, int x, int y, float d_max
 }
 
 void LineDrawer::drawPyramidBounded(const DisparityPyramid& min_pyramid, const DisparityPyramid& max_pyramid,
-                                    const DisparityBlockBound& bound, const Eigen::Isometry3d& T_W_C,
-                                    LocalGrid* grid, DrawStatistics* stats) {
+                                    const DisparityBlockBound& bound, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
+                                    DrawStatistics* stats) {
   CV_Assert(min_pyramid.type() == PyramidType::kMinDisparity && max_pyramid.type() == PyramidType::kMaxDisparity &&
             min_pyramid.topLevel() == max_pyramid.topLevel());
   stats->coordinate_transfers += 1;  // the camera centre

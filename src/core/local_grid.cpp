@@ -28,9 +28,8 @@ void LocalGrid::reset(const Eigen::Vector3i& origin_index, const Eigen::Vector3i
     return;
   }
   data_.resize(cells, kUnknown);  // a grown grid's new cells: unknown already
-  pool->runInChunks(kept, kFillChunkCells, [&](size_t begin, size_t end) {
-    std::fill(data_.begin() + begin, data_.begin() + end, kUnknown);
-  });
+  pool->runInChunks(kept, kFillChunkCells,
+                    [&](size_t begin, size_t end) { std::fill(data_.begin() + begin, data_.begin() + end, kUnknown); });
 }
 
 void LocalGrid::clear() { std::fill(data_.begin(), data_.end(), kUnknown); }

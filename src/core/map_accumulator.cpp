@@ -139,8 +139,8 @@ void MapAccumulator::reset() {
 void MapAccumulator::load(const std::string& path) {
   const std::unique_ptr<octomap::OcTree> file = readOcTreeFile(path);
   if (std::abs(file->getResolution() - config_.resolution_m) > 1e-9 * config_.resolution_m)
-    throw std::runtime_error("'" + path + "' has " + std::to_string(file->getResolution()) +
-                             " m cells, the map " + std::to_string(config_.resolution_m) + " m");
+    throw std::runtime_error("'" + path + "' has " + std::to_string(file->getResolution()) + " m cells, the map " +
+                             std::to_string(config_.resolution_m) + " m");
   auto loaded = std::make_unique<AccumulatingOcTree>(config_.resolution_m);
   loaded->setClampingThresMin(config_.clamping_min_prob);
   loaded->setClampingThresMax(config_.clamping_max_prob);
@@ -217,8 +217,8 @@ bool MapAccumulator::admits(const GridUpdateView& update, std::string* why) cons
                 std::to_string(config_.resolution_m) + " m");
   const uint64_t cells = static_cast<uint64_t>(update.size.x()) * update.size.y() * update.size.z();
   if (cells > config_.max_update_cells)
-    return fail("the update's box has " + std::to_string(cells) + " cells, more than max_update_cells = " +
-                std::to_string(config_.max_update_cells));
+    return fail("the update's box has " + std::to_string(cells) +
+                " cells, more than max_update_cells = " + std::to_string(config_.max_update_cells));
   // Global index g is OcTree key g + offset, a 16-bit number.
   const int64_t offset = tree_->coordToKey(0.0), key_max = 2 * offset - 1;
   for (int a = 0; a < 3; ++a) {
@@ -239,8 +239,10 @@ bool MapAccumulator::admits(const GridUpdateView& update, std::string* why) cons
 
 bool MapAccumulator::integrate(const GridUpdateView& update, std::string* why) {
   if (!admits(update, why)) return false;
-  if (fusion_) fuseInParts(update);
-  else fuseInOrder(update);
+  if (fusion_)
+    fuseInParts(update);
+  else
+    fuseInOrder(update);
   inner_stale_ = true;
   if (W_recent_origins_.size() < kPruneOrigins) {
     W_recent_origins_.push_back(update.W_sensor_origin);
@@ -333,8 +335,8 @@ size_t MapAccumulator::prune() {
   // Nothing to do until the map reaches a slack beyond the extent: each
   // prune rebuilds the tree, which must not happen at every update of a long flight.
   const double slack_m = kPruneSlack * config_.max_extent_m;
-  if (W_extent_.isEmpty() || ((W_extent_.min().array() >= lo - slack_m).all() &&
-                              (W_extent_.max().array() <= hi + slack_m).all()))
+  if (W_extent_.isEmpty() ||
+      ((W_extent_.min().array() >= lo - slack_m).all() && (W_extent_.max().array() <= hi + slack_m).all()))
     return 0;
   W_extent_ = W_extent_.intersection(Eigen::AlignedBox3d(lo.matrix(), hi.matrix()));
   auto inside = [&](const octomap::OcTree::leaf_iterator& it) {

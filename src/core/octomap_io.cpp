@@ -15,8 +15,8 @@
 #include <functional>
 #include <ostream>
 #include <sstream>
-#include <streambuf>
 #include <stdexcept>
+#include <streambuf>
 #include <vector>
 
 namespace stereo_occupancy {
@@ -47,7 +47,7 @@ constexpr size_t kMaxHeaderBytes = 4096;
 /// (child i follows if bit i is set), for kBinary the two-bit codes
 /// (01 occupied leaf, 10 free leaf, 11 inner node that follows, 00 none).
 struct Children {
-  unsigned inner = 0;  ///< children whose own records follow in the stream
+  unsigned inner = 0;   ///< children whose own records follow in the stream
   unsigned leaves = 0;  ///< kBinary: children that are leaves, told by their codes alone
 };
 
@@ -110,7 +110,8 @@ std::unique_ptr<octomap::OcTree> readOcTreeData(const std::string& bytes, OcTree
   auto tree = std::make_unique<octomap::OcTree>(resolution_m);
   if (bytes.empty()) return tree;
   std::istringstream in(bytes);
-  const bool read = static_cast<bool>(encoding == OcTreeEncoding::kFull ? tree->readData(in) : tree->readBinaryData(in));
+  const bool read =
+      static_cast<bool>(encoding == OcTreeEncoding::kFull ? tree->readData(in) : tree->readBinaryData(in));
   if (!read || tree->size() != shape.nodes) throw std::runtime_error("OctoMap could not read the tree's data");
   return tree;
 }
@@ -224,8 +225,10 @@ class FileDescriptorBuffer : public std::streambuf {
     while (error_ == 0 && p < pptr()) {
       const ssize_t n = ::write(fd_, p, static_cast<size_t>(pptr() - p));
       if (n < 0 && errno == EINTR) continue;
-      if (n <= 0) error_ = n < 0 ? errno : EIO;
-      else p += n;
+      if (n <= 0)
+        error_ = n < 0 ? errno : EIO;
+      else
+        p += n;
     }
     setp(buffer_, buffer_ + sizeof buffer_);
     return error_ == 0 ? 0 : -1;

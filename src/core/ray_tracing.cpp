@@ -44,9 +44,12 @@ void RayTracer::traverse(const Eigen::Isometry3d& T_W_C, LocalGrid* grid, DrawSt
   auto rowInterval = [&](const Eigen::Vector3d& A, double* x_lo, double* x_hi) {
     double lo = 0.0, hi = size.x() - 1.0;
     auto atLeastZero = [&](double p, double q) {  // p + q·x >= 0
-      if (q > 0.0) lo = std::max(lo, -p / q);
-      else if (q < 0.0) hi = std::min(hi, -p / q);
-      else if (p < 0.0) hi = -1.0;
+      if (q > 0.0)
+        lo = std::max(lo, -p / q);
+      else if (q < 0.0)
+        hi = std::min(hi, -p / q);
+      else if (p < 0.0)
+        hi = -1.0;
     };
     atLeastZero(A.z(), S.z());
     atLeastZero(A.x() - a_lo * A.z(), S.x() - a_lo * S.z());
@@ -88,7 +91,7 @@ void RayTracer::traverse(const Eigen::Isometry3d& T_W_C, LocalGrid* grid, DrawSt
         if (l2 > max_range2) continue;
         const double l = std::sqrt(l2);
         const float d_hat = lookup(C_p, u, v, stats);  // step 2c
-        if (d_hat < 0.0f) continue;                     // footprint without information
+        if (d_hat < 0.0f) continue;                    // footprint without information
         // Step 2d. The ray through (u, v) is the cell centre's: |p_c| / z_c = l / z.
         // A cell behind the measurement is unknown: tested before the profile is built.
         const float l_f = static_cast<float>(l);
@@ -98,7 +101,7 @@ void RayTracer::traverse(const Eigen::Isometry3d& T_W_C, LocalGrid* grid, DrawSt
           if (l_f - m.l_p_m > table_.tailOf(m.delta_l_m)) continue;
           profile = table_.profile(m.l_p_m, m.delta_l_m);
         }
-        row[x] = profile.at(l_f);                             // step 2e
+        row[x] = profile.at(l_f);  // step 2e
         ++stats->grid_cells_drawn;
       }
     }
@@ -257,7 +260,7 @@ class FootprintSearch {
 
   /// Does block b of level j, [b·2^j, (b+1)·2^j), overlap [lo, hi)?
   static bool overlaps(int b, int j, double lo, double hi) {
-    return static_cast<double>(b << j) < hi && static_cast<double>((b + 1) << j) > lo;
+    return static_cast<double>(b << j)<hi&& static_cast<double>((b + 1) << j)> lo;
   }
   /// Does block (bx, by) of level j lie wholly inside the footprint?
   bool inside(int bx, int by, int j) const {
@@ -307,8 +310,8 @@ class FootprintSearch {
 }  // namespace
 
 void RayTracer::drawPyramidBounded(const DisparityPyramid& min_pyramid, const DisparityPyramid& max_pyramid,
-                                   const DisparityBlockBound& bound, const Eigen::Isometry3d& T_W_C,
-                                   LocalGrid* grid, DrawStatistics* stats) const {
+                                   const DisparityBlockBound& bound, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
+                                   DrawStatistics* stats) const {
   CV_Assert(min_pyramid.type() == PyramidType::kMinDisparity && max_pyramid.type() == PyramidType::kMaxDisparity &&
             min_pyramid.topLevel() == max_pyramid.topLevel());
   const int top = max_pyramid.topLevel();

@@ -40,8 +40,8 @@ bool StereoCameraConfig::isValid(std::string* why) const {
 bool StereoCameraConfig::operator==(const StereoCameraConfig& o) const {
   return width_px == o.width_px && height_px == o.height_px && focal_length_px == o.focal_length_px &&
          cx_px == o.cx_px && cy_px == o.cy_px && baseline_m == o.baseline_m && delta_d_px == o.delta_d_px &&
-         min_range_m == o.min_range_m && max_range_m == o.max_range_m &&
-         min_disparity_px == o.min_disparity_px && max_disparity_px == o.max_disparity_px;
+         min_range_m == o.min_range_m && max_range_m == o.max_range_m && min_disparity_px == o.min_disparity_px &&
+         max_disparity_px == o.max_disparity_px;
 }
 
 StereoCameraModel::StereoCameraModel(const StereoCameraConfig& config)

@@ -73,8 +73,8 @@ size_t GuardPass::guardNearOccupied(const Guard& guard, WorkerPool* pool, const 
   // A cell is marked whoever sees it first: the grid and the count do not
   // depend on the order.
   const int min_slabs = 2 * radius + 1;
-  const int chunk_slabs = std::max(min_slabs, (size_.z() + 2 * static_cast<int>(workers) - 1) /
-                                                  (2 * static_cast<int>(workers)));
+  const int chunk_slabs =
+      std::max(min_slabs, (size_.z() + 2 * static_cast<int>(workers) - 1) / (2 * static_cast<int>(workers)));
   const int chunks = (size_.z() + chunk_slabs - 1) / chunk_slabs;
   if (workers == 1 || chunks < 2) return guardSlabs(guard, 0, size_.z(), occupied_blocks);
   std::vector<size_t> marked(static_cast<size_t>(chunks), 0);

@@ -10,11 +10,11 @@
 #include <image_transport/subscriber_filter.h>
 #include <message_filters/subscriber.h>
 #include <nodelet/nodelet.h>
-#include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/message_filter.h>
 #include <tf2_ros/transform_listener.h>
+#include <pluginlib/class_list_macros.hpp>
 
 #include <boost/bind/bind.hpp>
 
@@ -193,8 +193,7 @@ void DisparityMapper::onInit() {
 
   NODELET_INFO("DisparityMapper: %s with the %s profile at %.3g m cells into frame '%s', range %.3g m, from '%s'",
                toString(params.drawing.algorithm), toString(params.drawing.sensor_model.profile),
-               params.drawing.resolution_m, params.world_frame.c_str(),
-               params.camera.max_range_m,
+               params.drawing.resolution_m, params.world_frame.c_str(), params.camera.max_range_m,
                params.use_depth ? nh.resolveName("depth").c_str() : nh.resolveName("disparity").c_str());
 }
 
@@ -207,14 +206,15 @@ DisparityMapper::~DisparityMapper() {
   const DisparityMapperParameters& params = mapping_->parameters();
   // One line for scripts: counts and the processing time per image (draw,
   // blur, encode, publish). On stderr: rosconsole may be gone at shutdown.
-  std::fprintf(stderr, "DisparityMapper summary: images_received=%lu images_processed=%lu dropped_no_transform=%lu "
-           "dropped_invalid=%lu ms_per_image_mean=%.3f ms_per_image_median=%.3f ms_per_image_p99=%.3f "
-           "ms_per_image_max=%.3f cpu_ms_per_image_median=%.3f cpu_ms_per_image_p99=%.3f algorithm=%s "
-           "resolution_m=%.2f\n",
-           static_cast<unsigned long>(n.images), static_cast<unsigned long>(n.mapped),
-           static_cast<unsigned long>(n.no_transform + filter_dropped_), static_cast<unsigned long>(n.refused),
-           wall.mean_ms, wall.median_ms, wall.p99_ms, wall.max_ms, cpu.median_ms, cpu.p99_ms,
-           toString(params.drawing.algorithm), params.drawing.resolution_m);
+  std::fprintf(stderr,
+               "DisparityMapper summary: images_received=%lu images_processed=%lu dropped_no_transform=%lu "
+               "dropped_invalid=%lu ms_per_image_mean=%.3f ms_per_image_median=%.3f ms_per_image_p99=%.3f "
+               "ms_per_image_max=%.3f cpu_ms_per_image_median=%.3f cpu_ms_per_image_p99=%.3f algorithm=%s "
+               "resolution_m=%.2f\n",
+               static_cast<unsigned long>(n.images), static_cast<unsigned long>(n.mapped),
+               static_cast<unsigned long>(n.no_transform + filter_dropped_), static_cast<unsigned long>(n.refused),
+               wall.mean_ms, wall.median_ms, wall.p99_ms, wall.max_ms, cpu.median_ms, cpu.p99_ms,
+               toString(params.drawing.algorithm), params.drawing.resolution_m);
 }
 
 void DisparityMapper::reconfigure(DisparityMapperConfig& config, uint32_t /*level*/) {
@@ -250,8 +250,9 @@ void DisparityMapper::transformFailure(const boost::shared_ptr<const M>& msg, tf
     ++filter_dropped_;
     last_problem_ = std::string("dropped an image: ") + what;
   }
-  NODELET_WARN_THROTTLE(kWarnThrottleS, "dropped an image from '%s' at %.3f: %s (to '%s')", msg->header.frame_id.c_str(),
-                        msg->header.stamp.toSec(), what, parameters().world_frame.c_str());
+  NODELET_WARN_THROTTLE(kWarnThrottleS, "dropped an image from '%s' at %.3f: %s (to '%s')",
+                        msg->header.frame_id.c_str(), msg->header.stamp.toSec(), what,
+                        parameters().world_frame.c_str());
 }
 
 template <class M>
@@ -268,9 +269,10 @@ void DisparityMapper::arrival(const boost::shared_ptr<const M>& msg) {
   if (!last_image_stamp_.isZero() && stamp + ros::Duration(1.0) < last_image_stamp_) {
     ++time_jumps_back_;
     last_problem_ = "image stamps went back";
-    NODELET_WARN("image stamps went back by %.3f s (a looping bag?): clearing the tf buffer; the accumulated map "
-                 "keeps what it has (call the accumulator's ~reset to start over)",
-                 (last_image_stamp_ - msg->header.stamp).toSec());
+    NODELET_WARN(
+        "image stamps went back by %.3f s (a looping bag?): clearing the tf buffer; the accumulated map "
+        "keeps what it has (call the accumulator's ~reset to start over)",
+        (last_image_stamp_ - msg->header.stamp).toSec());
     tf_buffer_->clear();
   }
   last_image_stamp_ = stamp;
@@ -297,8 +299,10 @@ void DisparityMapper::checkWorldFrame() {
     std::lock_guard<std::mutex> lock(mutex_);
     last_problem_ = "world_frame '" + params.world_frame + "' does not exist in tf";
   }
-  NODELET_WARN_THROTTLE(kWorldFrameWarnThrottleS, "%lu images came but none was mapped for %.0f s: world_frame '%s' does not exist in tf "
-                        "(%s)", static_cast<unsigned long>(arrived), kNoProgressWarnS, params.world_frame.c_str(),
+  NODELET_WARN_THROTTLE(kWorldFrameWarnThrottleS,
+                        "%lu images came but none was mapped for %.0f s: world_frame '%s' does not exist in tf "
+                        "(%s)",
+                        static_cast<unsigned long>(arrived), kNoProgressWarnS, params.world_frame.c_str(),
                         frames.empty() ? "tf holds no frames" : frames.c_str());
 }
 
@@ -326,8 +330,10 @@ void DisparityMapper::process(const char* what, MapImage&& map_image) {
   if (!update) {
     last_problem_ = result.why;
     if (result.setup_refused_now)
-      NODELET_ERROR("cannot map with this camera and these parameters: %s; its images are dropped until the "
-                    "camera or the parameters (dynamic_reconfigure) change", result.why.c_str());
+      NODELET_ERROR(
+          "cannot map with this camera and these parameters: %s; its images are dropped until the "
+          "camera or the parameters (dynamic_reconfigure) change",
+          result.why.c_str());
     else if (result.outcome == FrameOutcome::kNoTransform)
       NODELET_WARN_THROTTLE(kWarnThrottleS, "dropped a %s: %s", what, result.why.c_str());
     else if (result.why != mapping_->refusedSetup())  // a refused set-up was reported once, as an error
@@ -344,7 +350,7 @@ void DisparityMapper::process(const char* what, MapImage&& map_image) {
     NODELET_WARN_THROTTLE(kWarnThrottleS, "%s (%lu such images so far)", result.why.c_str(),
                           static_cast<unsigned long>(mapping_->counters().mapped_nothing));
   }
-  update->source = getName();  // nodelets in one manager share a node name
+  update->source = getName();   // nodelets in one manager share a node name
   update_pub_.publish(update);  // as Ptr: no copy to nodelets in the same manager
   if (cloud_pub_.getNumSubscribers() > 0) {
     try {  // bad_alloc for a huge grid: nothing may leave a callback, and the update is out already
@@ -363,7 +369,8 @@ void DisparityMapper::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat
   const FrameCounters& n = mapping_->counters();
   const bool dropping = n.no_transform + filter_dropped_ + n.refused + n.mapped_nothing + n.info_mismatch > 0;
   if (!mapping_->refusedSetup().empty())
-    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "cannot map with this camera: " + mapping_->refusedSetup());
+    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR,
+                   "cannot map with this camera: " + mapping_->refusedSetup());
   else
     status.summary(dropping ? diagnostic_msgs::DiagnosticStatus::WARN : diagnostic_msgs::DiagnosticStatus::OK,
                    dropping ? last_problem_ : "mapping");

@@ -7,9 +7,9 @@
 
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <nodelet/nodelet.h>
-#include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
 #include <std_srvs/Empty.h>
+#include <pluginlib/class_list_macros.hpp>
 
 #include <cstdio>
 #include <memory>
@@ -70,8 +70,9 @@ void OctomapAccumulator::onInit() {
     return;
   }
   if (!startMap()) return;
-  saver_ = std::make_unique<MapSaver>(params_.saving, params_.map, fusion_.get(), &mutex_,
-                                      [this](const std::string& problem) { last_problem_ = problem; }, getName());
+  saver_ = std::make_unique<MapSaver>(
+      params_.saving, params_.map, fusion_.get(), &mutex_,
+      [this](const std::string& problem) { last_problem_ = problem; }, getName());
   if (!params_.saving.save_dir.empty()) saver_->openDatabase();
   publisher_ = std::make_unique<MapPublisher>(params_.publisher, params_.map, fusion_.get(), &mutex_, getName());
   publisher_->advertise(nh);
@@ -92,10 +93,11 @@ void OctomapAccumulator::onInit() {
   const auto& store = fusion_->mission().store();
   const std::string beyond = store ? "kept in " + store->path() : "dropped";
   const std::string& save_dir = params_.saving.save_dir;
-  NODELET_INFO("OctomapAccumulator: %.3g m cells in frame '%s', live map within %.0f m of the vehicle, beyond it %s, "
-               "saving to '%s'",
-               params_.map.resolution_m, params_.world_frame.empty() ? "(the first update's)" : params_.world_frame.c_str(),
-               params_.map.max_extent_m, beyond.c_str(), save_dir.empty() ? "(nowhere)" : save_dir.c_str());
+  NODELET_INFO(
+      "OctomapAccumulator: %.3g m cells in frame '%s', live map within %.0f m of the vehicle, beyond it %s, "
+      "saving to '%s'",
+      params_.map.resolution_m, params_.world_frame.empty() ? "(the first update's)" : params_.world_frame.c_str(),
+      params_.map.max_extent_m, beyond.c_str(), save_dir.empty() ? "(nowhere)" : save_dir.c_str());
 }
 
 bool OctomapAccumulator::startMap() {
@@ -124,8 +126,7 @@ OctomapAccumulator::~OctomapAccumulator() {
                  "fusion_ms_median=%.3f fusion_ms_p99=%.3f fusion_ms_max=%.3f\n",
                  static_cast<unsigned long>(fusion_->counters().received),
                  static_cast<unsigned long>(fusion_->counters().refused),
-                 static_cast<unsigned long>(fusion_->counters().lost),
-                 fusion.median_ms, fusion.p99_ms, fusion.max_ms);
+                 static_cast<unsigned long>(fusion_->counters().lost), fusion.median_ms, fusion.p99_ms, fusion.max_ms);
   }
   if (saver_) saver_->saveOnShutdown(lock);
 }
@@ -149,9 +150,11 @@ void OctomapAccumulator::updateCallback(const ros::MessageEvent<const OccupancyU
   }
   if (fusion_->counters().lost > lost_before) {
     last_problem_ = "updates lost before they reached the map";
-    NODELET_WARN_THROTTLE(kWarnThrottleS, "%lu updates from %s never arrived (%lu lost so far): the accumulator "
+    NODELET_WARN_THROTTLE(kWarnThrottleS,
+                          "%lu updates from %s never arrived (%lu lost so far): the accumulator "
                           "fell behind (a large map published under the lock?) or the link drops them; "
-                          "update_queue_size is %d", static_cast<unsigned long>(fusion_->counters().lost - lost_before),
+                          "update_queue_size is %d",
+                          static_cast<unsigned long>(fusion_->counters().lost - lost_before),
                           event.getPublisherName().c_str(), static_cast<unsigned long>(fusion_->counters().lost),
                           params_.update_queue_size);
   }
@@ -205,9 +208,9 @@ void OctomapAccumulator::diagnose(diagnostic_updater::DiagnosticStatusWrapper& s
   if (saver_->lastSaveFailed())
     status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, last_problem_);
   else
-    status.summary(n.refused + n.lost > 0 ? diagnostic_msgs::DiagnosticStatus::WARN
-                                          : diagnostic_msgs::DiagnosticStatus::OK,
-                   n.refused + n.lost > 0 ? last_problem_ : "accumulating");
+    status.summary(
+        n.refused + n.lost > 0 ? diagnostic_msgs::DiagnosticStatus::WARN : diagnostic_msgs::DiagnosticStatus::OK,
+        n.refused + n.lost > 0 ? last_problem_ : "accumulating");
   status.add("frame", fusion_->frameId());
   status.add("updates received", n.received);
   status.add("updates refused", n.refused);

@@ -72,8 +72,9 @@ bool cameraFromDisparityImage(const stereo_msgs::DisparityImage& msg, const sens
   }
   std::string reason;
   if (!c.isValid(&reason)) {
-    if (why) *why = "camera from the message: " + reason + " (f = " + std::to_string(msg.f) +
-                    " px, T = " + std::to_string(msg.T) + " m)";
+    if (why)
+      *why = "camera from the message: " + reason + " (f = " + std::to_string(msg.f) +
+             " px, T = " + std::to_string(msg.T) + " m)";
     return false;
   }
   *camera = c;

@@ -90,17 +90,21 @@ void octomapMsg(double resolution_m, bool binary, const std_msgs::Header& header
 }  // namespace
 
 void toMsg(const octomap::OcTree& tree, bool binary, const std_msgs::Header& header, Octomap* msg) {
-  octomapMsg(tree.getResolution(), binary, header, 0, [&](std::ostream& out) {
-    if (binary)
-      tree.writeBinaryData(out);
-    else
-      tree.writeData(out);
-  }, msg);
+  octomapMsg(
+      tree.getResolution(), binary, header, 0,
+      [&](std::ostream& out) {
+        if (binary)
+          tree.writeBinaryData(out);
+        else
+          tree.writeData(out);
+      },
+      msg);
 }
 
 void toMsg(const MapSnapshot& snapshot, bool binary, const std_msgs::Header& header, Octomap* msg) {
-  octomapMsg(snapshot.resolution(), binary, header, snapshot.dataBytesBound(binary),
-             [&](std::ostream& out) { snapshot.writeData(binary, out); }, msg);
+  octomapMsg(
+      snapshot.resolution(), binary, header, snapshot.dataBytesBound(binary),
+      [&](std::ostream& out) { snapshot.writeData(binary, out); }, msg);
 }
 
 std::unique_ptr<octomap::OcTree> treeFromMsg(const Octomap& msg) {
@@ -125,10 +129,18 @@ std_msgs::ColorRGBA heightColour(double z, double z_min, double z_max) {
   std_msgs::ColorRGBA c;
   c.a = 1.0f;
   switch (std::min(static_cast<int>(hue), 3)) {
-    case 0: c.r = 1.0f, c.g = rising; break;
-    case 1: c.r = rising, c.g = 1.0f; break;
-    case 2: c.g = 1.0f, c.b = rising; break;
-    default: c.g = rising, c.b = 1.0f; break;
+    case 0:
+      c.r = 1.0f, c.g = rising;
+      break;
+    case 1:
+      c.r = rising, c.g = 1.0f;
+      break;
+    case 2:
+      c.g = 1.0f, c.b = rising;
+      break;
+    default:
+      c.g = rising, c.b = 1.0f;
+      break;
   }
   return c;
 }

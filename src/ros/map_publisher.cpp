@@ -131,8 +131,7 @@ void MapPublisher::publishOutputs() {
     if (markers.occupied) markers_pub_.publish(markers.occupied);
     if (markers.free) free_markers_pub_.publish(markers.free);
   } catch (const std::exception& e) {
-    ROS_ERROR_THROTTLE_NAMED(kErrorThrottleS, log_name_, "could not publish the changed blocks' markers: %s",
-                             e.what());
+    ROS_ERROR_THROTTLE_NAMED(kErrorThrottleS, log_name_, "could not publish the changed blocks' markers: %s", e.what());
   }
   if (!full_due) return;
   publishWholeMap();

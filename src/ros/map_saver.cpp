@@ -56,16 +56,19 @@ void MapSaver::openDatabase() {
   } catch (const std::exception& e) {
     // The live map works without it; what leaves max_extent_m is then lost.
     database_problem_ = e.what();
-    ROS_ERROR_NAMED(log_name_, "%s; mapping goes on without it: cells beyond max_extent_m are dropped, and ~save_map "
-                    "answers false and writes only the live map, to %s%s.bt and .ot", e.what(),
-                    config_.map_name.c_str(), kLiveOnlySuffix);
+    ROS_ERROR_NAMED(log_name_,
+                    "%s; mapping goes on without it: cells beyond max_extent_m are dropped, and ~save_map "
+                    "answers false and writes only the live map, to %s%s.bt and .ot",
+                    e.what(), config_.map_name.c_str(), kLiveOnlySuffix);
     return;
   }
   const size_t tiles = fusion_->mission().store()->tiles().size();
   const TileStoreStatus status = fusion_->mission().store()->status();
   if (status.damaged_rows > 0)
-    ROS_ERROR_NAMED(log_name_, "%s: %zu damaged tile rows moved to its table damaged_tiles; those tiles start empty "
-                    "(the first: %s)", path.c_str(), status.damaged_rows, status.first_damage.c_str());
+    ROS_ERROR_NAMED(log_name_,
+                    "%s: %zu damaged tile rows moved to its table damaged_tiles; those tiles start empty "
+                    "(the first: %s)",
+                    path.c_str(), status.damaged_rows, status.first_damage.c_str());
   ROS_INFO_NAMED(log_name_, "the mission's tiles are kept in %s (%s, %zu tiles)", path.c_str(),
                  tiles ? "continued" : "new", tiles);
 }

@@ -90,8 +90,10 @@ class PairReader {
     const auto it = values_.find(name);
     if (it == values_.end()) return;
     T parsed = *value;
-    if (parse(it->second, &parsed)) *value = parsed;
-    else if (error_.empty()) error_ = std::string(name) + ": cannot read '" + it->second + "'";
+    if (parse(it->second, &parsed))
+      *value = parsed;
+    else if (error_.empty())
+      error_ = std::string(name) + ": cannot read '" + it->second + "'";
   }
   const std::set<std::string>& asked() const { return asked_; }
   const std::string& error() const { return error_; }
@@ -113,9 +115,12 @@ class PairReader {
     return !s.empty() && *end == '\0' && l == *v;
   }
   static bool parse(const std::string& s, bool* v) {
-    if (s == "true" || s == "1") *v = true;
-    else if (s == "false" || s == "0") *v = false;
-    else return false;
+    if (s == "true" || s == "1")
+      *v = true;
+    else if (s == "false" || s == "0")
+      *v = false;
+    else
+      return false;
     return true;
   }
 
@@ -162,7 +167,9 @@ struct MessageWriter {
   void operator()(const char* name, double* value) const {
     add<dynamic_reconfigure::DoubleParameter>(&msg->doubles, name, *value);
   }
-  void operator()(const char* name, int* value) const { add<dynamic_reconfigure::IntParameter>(&msg->ints, name, *value); }
+  void operator()(const char* name, int* value) const {
+    add<dynamic_reconfigure::IntParameter>(&msg->ints, name, *value);
+  }
   void operator()(const char* name, bool* value) const {
     add<dynamic_reconfigure::BoolParameter>(&msg->bools, name, *value);
   }

@@ -69,7 +69,8 @@ void writePfm(const std::string& path, const cv::Mat& image) {
   if (!out) throw std::runtime_error("cannot write '" + path + "'");
   out << "Pf\n" << image.cols << " " << image.rows << "\n" << (hostIsLittleEndian() ? "-1" : "1") << "\n";
   for (int y = image.rows - 1; y >= 0; --y)
-    out.write(reinterpret_cast<const char*>(image.ptr<float>(y)), static_cast<std::streamsize>(image.cols * sizeof(float)));
+    out.write(reinterpret_cast<const char*>(image.ptr<float>(y)),
+              static_cast<std::streamsize>(image.cols * sizeof(float)));
   if (!out) throw std::runtime_error("failed writing '" + path + "'");
 }
 

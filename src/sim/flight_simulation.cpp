@@ -60,8 +60,8 @@ FlightScenario postsScenario() {
   s.T_B_C = forwardCamera(0.15);
   s.frame_rate_hz = 10.0;
   // 4 m/s at 4 m altitude with a gentle weave, 20 s.
-  s.T_W_B = weavingFlight(200, s.frame_rate_hz, 4.0, 0.75, 0.4,
-                          [](double t) { return 4.0 + 0.3 * std::sin(0.25 * t); });
+  s.T_W_B =
+      weavingFlight(200, s.frame_rate_hz, 4.0, 0.75, 0.4, [](double t) { return 4.0 + 0.3 * std::sin(0.25 * t); });
   return s;
 }
 
@@ -73,8 +73,8 @@ FlightScenario housesScenario() {
   for (int k = 0; k < 6; ++k) {
     const double x = 12.0 + 16.0 * k;
     const double h = 5.0 + 2.0 * (k % 3);
-    s.scene.addBox({x, 9.0, 0.0}, {x + 10.0, 17.0, h});                // left house
-    s.scene.addBox({x + 1.0, 10.0, h}, {x + 9.0, 16.0, h + 2.0});      // its roof
+    s.scene.addBox({x, 9.0, 0.0}, {x + 10.0, 17.0, h});                 // left house
+    s.scene.addBox({x + 1.0, 10.0, h}, {x + 9.0, 16.0, h + 2.0});       // its roof
     s.scene.addBox({x + 4.0, -18.0, 0.0}, {x + 12.0, -10.0, h - 1.0});  // right house
   }
   // Trees as trunks with crowns, a lamp post every 20 m.
@@ -104,8 +104,8 @@ FlightScenario forestScenario() {
   // Thin trunks (0.08-0.3 m, 6-14 m tall) at random, none within 2.5 m of
   // the flight's lane y = 0; a few are texture-less (birch bark in shade).
   std::mt19937 rng(7);
-  std::uniform_real_distribution<double> along(8.0, 110.0), across(-25.0, 25.0), width(0.08, 0.3),
-      height(6.0, 14.0), unit(0.0, 1.0);
+  std::uniform_real_distribution<double> along(8.0, 110.0), across(-25.0, 25.0), width(0.08, 0.3), height(6.0, 14.0),
+      unit(0.0, 1.0);
   for (int k = 0; k < 260; ++k) {
     const double x = along(rng), y = across(rng), w = width(rng), h = height(rng);
     const bool textureless = unit(rng) < 0.05;
@@ -138,7 +138,7 @@ FlightScenario wiresScenario() {
   }
   s.camera = StereoCameraConfig();
   s.effects.sky_unmatched_above_row = -1;  // all sky matched at zero disparity
-  s.T_B_C = forwardCamera(-0.08);           // pitched slightly up
+  s.T_B_C = forwardCamera(-0.08);          // pitched slightly up
   s.frame_rate_hz = 10.0;
   // 4 m/s at 4.5 m altitude, drifting sideways, 20 s.
   for (int i = 0; i < 200; ++i) {
@@ -162,9 +162,7 @@ FlightScenario farView(FlightScenario near, const std::string& name, double firs
 
 }  // namespace
 
-std::vector<std::string> scenarioNames() {
-  return {"posts", "houses", "forest", "wires", "posts_far", "forest_far"};
-}
+std::vector<std::string> scenarioNames() { return {"posts", "houses", "forest", "wires", "posts_far", "forest_far"}; }
 
 /// Half a mission's path: 4 m/s for 30 min, weaving 30 m sideways over
 /// 800 m, 4-6 m up; scenery generated along it every 50 m, each stretch one of
@@ -192,12 +190,14 @@ FlightScenario missionScenario() {
       }
     } else if (kind == 2) {  // thin trunks, none within 3 m of the path
       for (int k = 0; k < 12; ++k) {
-        const double tx = x0 + kStretchM * unit(rng), ty = pathY(tx) + (unit(rng) < 0.5 ? -1.0 : 1.0) * (3.0 + 20.0 * unit(rng));
+        const double tx = x0 + kStretchM * unit(rng),
+                     ty = pathY(tx) + (unit(rng) < 0.5 ? -1.0 : 1.0) * (3.0 + 20.0 * unit(rng));
         const double w = 0.1 + 0.2 * unit(rng), h = 6.0 + 8.0 * unit(rng);
         s.scene.addBox({tx - 0.5 * w, ty - 0.5 * w, 0.0}, {tx + 0.5 * w, ty + 0.5 * w, h});
       }
     } else {  // a power line across the path: masts 20 m to each side, two 2 cm wires above the flight
-      for (double side : {-20.0, 20.0}) s.scene.addBox({x - 0.15, y + side - 0.15, 0.0}, {x + 0.15, y + side + 0.15, 10.0});
+      for (double side : {-20.0, 20.0})
+        s.scene.addBox({x - 0.15, y + side - 0.15, 0.0}, {x + 0.15, y + side + 0.15, 10.0});
       for (double z : {8.0, 9.0}) s.scene.addBox({x - 0.01, y - 20.0, z - 0.01}, {x + 0.01, y + 20.0, z + 0.01});
     }
   }
@@ -310,8 +310,10 @@ cv::Mat gaussianFrame(const FlightScenario& s, size_t frame, uint32_t seed) {
       }
       v += noise(rng);
       if (step > 0.0f) v = std::round(v / step) * step;
-      if (v < s.effects.min_search_disparity_px) v = 0.0f;       // too far for the search range
-      else if (v > s.effects.max_search_disparity_px) v = nan;  // too near for the search range
+      if (v < s.effects.min_search_disparity_px)
+        v = 0.0f;  // too far for the search range
+      else if (v > s.effects.max_search_disparity_px)
+        v = nan;  // too near for the search range
     }
   }
   return d;
@@ -324,9 +326,12 @@ uint32_t noiseSeed(uint32_t seed, size_t frame, uint32_t camera) {
 }  // namespace
 
 bool parseStereoMatcher(const std::string& name, StereoMatcher* matcher) {
-  if (name == "gaussian") *matcher = StereoMatcher::kGaussian;
-  else if (name == "sgbm") *matcher = StereoMatcher::kSgbm;
-  else return false;
+  if (name == "gaussian")
+    *matcher = StereoMatcher::kGaussian;
+  else if (name == "sgbm")
+    *matcher = StereoMatcher::kSgbm;
+  else
+    return false;
   return true;
 }
 
@@ -345,7 +350,8 @@ StereoImages renderStereoImages(const FlightScenario& s, size_t frame, uint32_t 
   const Eigen::Isometry3d T_W_L = s.cameraPose(frame);
   StereoImages images;
   // The two cameras at once: rendering costs about 0.2 s an image, the matching a quarter of that.
-  std::thread left([&] { images.left = renderGreyImage(s.scene, camera, T_W_L, noiseSeed(seed, frame, 0), s.appearance); });
+  std::thread left(
+      [&] { images.left = renderGreyImage(s.scene, camera, T_W_L, noiseSeed(seed, frame, 0), s.appearance); });
   images.right = renderGreyImage(s.scene, camera, rightCameraPose(T_W_L, s.camera.baseline_m),
                                  noiseSeed(seed, frame, 1), s.appearance);
   left.join();
@@ -363,8 +369,8 @@ std::string describeScene(const SyntheticScene& scene) {
   if (scene.ground_height_m) out << "ground z=" << *scene.ground_height_m << "\n";
   for (size_t i = 0; i < scene.boxes.size(); ++i) {
     const auto& b = scene.boxes[i];
-    out << "box " << b.min().x() << " " << b.min().y() << " " << b.min().z() << " " << b.max().x() << " "
-        << b.max().y() << " " << b.max().z() << (scene.textureless[i] ? " textureless" : "") << "\n";
+    out << "box " << b.min().x() << " " << b.min().y() << " " << b.min().z() << " " << b.max().x() << " " << b.max().y()
+        << " " << b.max().z() << (scene.textureless[i] ? " textureless" : "") << "\n";
   }
   return out.str();
 }

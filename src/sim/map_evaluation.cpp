@@ -83,13 +83,12 @@ size_t countCalledFree(const LocalGrid& grid, const std::vector<Eigen::Vector3i>
 std::string MapQuality::toJson() const {
   std::ostringstream out;
   out << "{\"occupied_cells\": " << occupied_cells << ", \"occupied_at_surface\": " << occupied_at_surface
-      << ", \"occupied_phantom\": " << occupied_phantom
-      << ", \"truth_surface_cells\": " << truth_surface_cells << ", \"surface_found\": " << surface_found
-      << ", \"surface_called_free\": " << surface_called_free << ", \"truth_empty_cells\": " << truth_empty_cells
-      << ", \"empty_known_free\": " << empty_known_free << ", \"occupied_precision\": " << occupiedPrecision()
-      << ", \"occupied_recall\": " << occupiedRecall() << ", \"surface_called_free_fraction\": "
-      << surfaceCalledFree() << ", \"free_coverage\": " << freeCoverage() << ", \"phantom_share\": "
-      << phantomShare() << ", \"f1\": " << f1() << "}";
+      << ", \"occupied_phantom\": " << occupied_phantom << ", \"truth_surface_cells\": " << truth_surface_cells
+      << ", \"surface_found\": " << surface_found << ", \"surface_called_free\": " << surface_called_free
+      << ", \"truth_empty_cells\": " << truth_empty_cells << ", \"empty_known_free\": " << empty_known_free
+      << ", \"occupied_precision\": " << occupiedPrecision() << ", \"occupied_recall\": " << occupiedRecall()
+      << ", \"surface_called_free_fraction\": " << surfaceCalledFree() << ", \"free_coverage\": " << freeCoverage()
+      << ", \"phantom_share\": " << phantomShare() << ", \"f1\": " << f1() << "}";
   return out.str();
 }
 
@@ -150,8 +149,10 @@ MapQuality evaluateMap(const octomap::OcTree& map, const SyntheticScene& scene, 
     ++q.occupied_cells;
     const double half = 0.5 * it.getSize();
     const double tolerance = std::sqrt(3.0) * half + c;
-    if (scene.distance(centre) <= tolerance) ++q.occupied_at_surface;
-    else if (!scene.isInside(centre)) ++q.occupied_phantom;
+    if (scene.distance(centre) <= tolerance)
+      ++q.occupied_at_surface;
+    else if (!scene.isInside(centre))
+      ++q.occupied_phantom;
   }
   for (uint64_t key : truth.surface) {
     const Eigen::Vector3i g = unpackCell(key);
@@ -192,15 +193,16 @@ void collectSurfaces(const FlightScenario& scenario, double resolution_m, double
         if (object == SyntheticScene::kHitNothing || !(range <= max_range_m)) continue;
         const Eigen::Vector3d W_dir = T_W_C.linear() * camera.rayThroughPixel(x, y).normalized();
         // Just behind the hit point, as in observeGroundTruth().
-        const uint64_t key = packCell(LocalGrid::globalIndex(T_W_C.translation() + (range + 1e-6) * W_dir, resolution_m));
+        const uint64_t key =
+            packCell(LocalGrid::globalIndex(T_W_C.translation() + (range + 1e-6) * W_dir, resolution_m));
         (object >= 0 ? (*boxes)[static_cast<size_t>(object)] : *ground).insert(key);
       }
   }
 }
 }  // namespace
 
-ObstacleZones observeObstacles(const FlightScenario& scenario, double resolution_m, double max_range_m,
-                               int frame_step, int pixel_step) {
+ObstacleZones observeObstacles(const FlightScenario& scenario, double resolution_m, double max_range_m, int frame_step,
+                               int pixel_step) {
   std::vector<std::unordered_set<uint64_t>> surfaces;
   std::unordered_set<uint64_t> ground;
   collectSurfaces(scenario, resolution_m, max_range_m, frame_step, pixel_step, &surfaces, &ground);

@@ -17,10 +17,22 @@ cv::Vec3b heightColour(double z, double z_min, double z_max) {
   const double f = h - sector;
   double r = 0, g = 0, b = 0;
   switch (sector) {
-    case 0: r = 1; g = f; break;
-    case 1: r = 1 - f; g = 1; break;
-    case 2: g = 1; b = f; break;
-    default: g = 1 - f; b = 1; break;
+    case 0:
+      r = 1;
+      g = f;
+      break;
+    case 1:
+      r = 1 - f;
+      g = 1;
+      break;
+    case 2:
+      g = 1;
+      b = f;
+      break;
+    default:
+      g = 1 - f;
+      b = 1;
+      break;
   }
   return cv::Vec3b(static_cast<uchar>(255 * b), static_cast<uchar>(255 * g), static_cast<uchar>(255 * r));
 }
@@ -29,11 +41,11 @@ namespace {
 
 const cv::Scalar kBackground(40, 40, 40);
 const cv::Scalar kInk(230, 230, 230);
-constexpr int kPlotMargin = 10;   ///< empty pixels around the cells
-constexpr int kAxisLeft = 60;     ///< room for the vertical axis' labels [px]
-constexpr int kAxisBottom = 40;   ///< room for the horizontal axis' labels [px]
-constexpr int kBarWidth = 16;     ///< the colour bar [px]
-constexpr int kBarRoom = 90;      ///< the colour bar and its labels [px]
+constexpr int kPlotMargin = 10;  ///< empty pixels around the cells
+constexpr int kAxisLeft = 60;    ///< room for the vertical axis' labels [px]
+constexpr int kAxisBottom = 40;  ///< room for the horizontal axis' labels [px]
+constexpr int kBarWidth = 16;    ///< the colour bar [px]
+constexpr int kBarRoom = 90;     ///< the colour bar and its labels [px]
 constexpr double kMinTickPx = 60.0;
 constexpr double kFontScale = 0.4;
 
@@ -83,7 +95,9 @@ cv::Mat framed(const cv::Mat& plot, double u0_m, double v0_m, double pixels_per_
   const int left = kAxisLeft, bottom = kPlotMargin + plot.rows;
   cv::rectangle(out, cv::Rect(left, kPlotMargin, plot.cols, plot.rows), kInk, 1);
   const double step = tickStep(pixels_per_m);
-  auto uPx = [&](double u_m) { return left + kPlotMargin + static_cast<int>(std::lround((u_m - u0_m) * pixels_per_m)); };
+  auto uPx = [&](double u_m) {
+    return left + kPlotMargin + static_cast<int>(std::lround((u_m - u0_m) * pixels_per_m));
+  };
   auto vPx = [&](double v_m) {
     return bottom - 1 - kPlotMargin - static_cast<int>(std::lround((v_m - v0_m) * pixels_per_m));
   };

@@ -33,7 +33,8 @@ bool boxTiles(const Eigen::AlignedBox3d& box, const Eigen::Isometry3d& T_C_W, co
       near_plane = true;
       continue;
     }
-    const double u = cfg.focal_length_px * p.x() / p.z() + cfg.cx_px, v = cfg.focal_length_px * p.y() / p.z() + cfg.cy_px;
+    const double u = cfg.focal_length_px * p.x() / p.z() + cfg.cx_px,
+                 v = cfg.focal_length_px * p.y() / p.z() + cfg.cy_px;
     x0 = std::min(x0, u), x1 = std::max(x1, u), y0 = std::min(y0, v), y1 = std::max(y1, v);
   }
   if (behind == 8) return false;  // the box lies wholly behind the camera
@@ -59,7 +60,9 @@ uint32_t hash32(uint32_t x) {
   return x;
 }
 
-uint32_t hashCombine(uint32_t seed, uint32_t value) { return hash32(seed ^ (value + 0x9e3779b9u + (seed << 6) + (seed >> 2))); }
+uint32_t hashCombine(uint32_t seed, uint32_t value) {
+  return hash32(seed ^ (value + 0x9e3779b9u + (seed << 6) + (seed >> 2)));
+}
 
 /// @p h mapped to [0, 1).
 double unitFromHash(uint32_t h) { return h * (1.0 / 4294967296.0); }
@@ -128,8 +131,8 @@ double texture(uint32_t face_id, double u_m, double v_m, double footprint_m) {
   double sum = 0.0;
   double wavelength = kFinestTextureWavelengthM;
   for (int o = 0; o < kTextureOctaves; ++o, wavelength *= 2.0) {
-    const double weight = std::clamp((wavelength / footprint_m - kNoOctaveFootprints) /
-                                         (kFullOctaveFootprints - kNoOctaveFootprints), 0.0, 1.0);
+    const double weight = std::clamp(
+        (wavelength / footprint_m - kNoOctaveFootprints) / (kFullOctaveFootprints - kNoOctaveFootprints), 0.0, 1.0);
     if (weight > 0.0)
       sum += weight * valueNoise(u_m / wavelength, v_m / wavelength, hashCombine(face_id, static_cast<uint32_t>(o)));
   }
@@ -164,7 +167,8 @@ struct Footprint {
   double du = 1.0, dv = 0.0;
 };
 
-double faceGrey(const SyntheticScene& scene, int object, const Face& face, const Footprint& fp, const ImageAppearance& look) {
+double faceGrey(const SyntheticScene& scene, int object, const Face& face, const Footprint& fp,
+                const ImageAppearance& look) {
   if (object == SyntheticScene::kHitNothing) return look.sky_grey;
   double albedo = look.ground_albedo_grey, contrast = look.ground_contrast;
   if (object >= 0) {
@@ -203,7 +207,8 @@ PixelHits castPixelRays(const SyntheticScene& scene, const StereoCameraModel& ca
     std::array<int, 4> r;
     if (!boxTiles(scene.boxes[k], T_C_W, cfg, tiles_x, tiles_y, &r)) continue;
     for (int ty = r[1]; ty <= r[3]; ++ty)
-      for (int tx = r[0]; tx <= r[2]; ++tx) tile_boxes[static_cast<size_t>(ty * tiles_x + tx)].push_back(static_cast<int>(k));
+      for (int tx = r[0]; tx <= r[2]; ++tx)
+        tile_boxes[static_cast<size_t>(ty * tiles_x + tx)].push_back(static_cast<int>(k));
   }
   PixelHits hits;
   hits.range_m.create(cfg.height_px, cfg.width_px, CV_64FC1);

@@ -32,7 +32,8 @@ bool SgbmParameters::isValid(std::string* why) const {
     if (why) *why = reason;
     return false;
   };
-  if (num_disparities <= 0 || num_disparities % 16 != 0) return fail("num_disparities must be a positive multiple of 16");
+  if (num_disparities <= 0 || num_disparities % 16 != 0)
+    return fail("num_disparities must be a positive multiple of 16");
   if (block_size_px < 1 || block_size_px % 2 == 0) return fail("block_size_px must be odd and >= 1");
   if (p1 < 0 || p2 <= p1) return fail("P2 must exceed P1 >= 0");
   if (prefilter_cap < 1 || uniqueness_ratio_percent < 0 || speckle_size_px < 0 || speckle_range_px < 0 ||

@@ -70,8 +70,7 @@ bool SyntheticScene::isInside(const Eigen::Vector3d& W_point) const {
   return false;
 }
 
-cv::Mat renderDisparity(const SyntheticScene& scene, const StereoCameraModel& camera,
-                        const Eigen::Isometry3d& T_W_C) {
+cv::Mat renderDisparity(const SyntheticScene& scene, const StereoCameraModel& camera, const Eigen::Isometry3d& T_W_C) {
   const auto& cfg = camera.config();
   cv::Mat disparity(cfg.height_px, cfg.width_px, CV_32FC1);
   const Eigen::Matrix3d R_W_C = T_W_C.linear();

@@ -203,8 +203,7 @@ std::vector<std::string> MissionMap::saveWhole(const std::string& directory, con
 
 std::vector<std::string> MissionMap::saveStore(TileStore& store, const std::string& directory,
                                                const std::string& base_name, double occupancy_threshold_prob) {
-  if (!store.flush())
-    throw std::runtime_error("the tile database cannot be written: " + store.status().last_error);
+  if (!store.flush()) throw std::runtime_error("the tile database cannot be written: " + store.status().last_error);
   std::vector<std::string> paths = {directory + "/" + base_name + ".bt", directory + "/" + base_name + ".ot"};
   for (const auto& p : paths) writeStore(store, p, occupancy_threshold_prob);
   return paths;
@@ -236,7 +235,8 @@ void MissionMap::writeStore(const TileStore& store, const std::string& path, dou
   std::string bytes;  // the current tile's row
   const TileTreeWriter writer(store.rows(), full, thresholdLog(store.resolution(), occupancy_threshold_prob),
                               [&](const TileRow& row, std::ostream& out) {
-                                if (!store.rowData(row.tile, &bytes)) throw std::runtime_error("a tile row went missing");
+                                if (!store.rowData(row.tile, &bytes))
+                                  throw std::runtime_error("a tile row went missing");
                                 writeTileRow(row, bytes, full, store.resolution(), occupancy_threshold_prob, out);
                               });
   writeFileAtomically(path, [&](std::ostream& out) {

@@ -140,7 +140,8 @@ TileStore::TileStore(const std::string& path, double resolution_m, Access access
     throw std::runtime_error("tile database '" + path + "': " + why);
   };
   const bool read_only = access == Access::kReadOnly;
-  const int flags = (read_only ? SQLITE_OPEN_READONLY : SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE) | SQLITE_OPEN_FULLMUTEX;
+  const int flags =
+      (read_only ? SQLITE_OPEN_READONLY : SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE) | SQLITE_OPEN_FULLMUTEX;
   if (sqlite3_open_v2(path.c_str(), &db_, flags, nullptr) != SQLITE_OK) fail(db_ ? sqlite3_errmsg(db_) : "cannot open");
   try {
     // Exclusive: a second accumulator on the same file would overwrite
@@ -149,10 +150,10 @@ TileStore::TileStore(const std::string& path, double resolution_m, Access access
     // to read a WAL database without writing it).
     if (!read_only) execute("PRAGMA locking_mode = EXCLUSIVE");
     const uint32_t file_mission = missionIdInFile(path);  // before SQLite reads the -wal file
-    if (sqlite3_exec(db_, read_only ? "BEGIN; SELECT count(*) FROM sqlite_master" : "BEGIN EXCLUSIVE", nullptr,
-                     nullptr, nullptr) != SQLITE_OK)
+    if (sqlite3_exec(db_, read_only ? "BEGIN; SELECT count(*) FROM sqlite_master" : "BEGIN EXCLUSIVE", nullptr, nullptr,
+                     nullptr) != SQLITE_OK)
       fail(sqlite3_errcode(db_) == SQLITE_BUSY ? "locked: another process has it open"
-                                                : std::string(sqlite3_errmsg(db_)));
+                                               : std::string(sqlite3_errmsg(db_)));
     checkWalBelongs(file_mission);
     openTables();  // before anything is written: another program's file stays as it was
     execute("COMMIT");
@@ -207,8 +208,9 @@ void TileStore::openTables() {
     if (resolution_m_ <= 0.0 || access_ == Access::kReadOnly) throw std::runtime_error("not a tile database (empty)");
     setMissionId();
     execute("CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL)");
-    execute("CREATE TABLE tiles (x INTEGER NOT NULL, y INTEGER NOT NULL, z INTEGER NOT NULL, "
-            "leaves INTEGER NOT NULL, octree BLOB NOT NULL, PRIMARY KEY (x, y, z)) WITHOUT ROWID");
+    execute(
+        "CREATE TABLE tiles (x INTEGER NOT NULL, y INTEGER NOT NULL, z INTEGER NOT NULL, "
+        "leaves INTEGER NOT NULL, octree BLOB NOT NULL, PRIMARY KEY (x, y, z)) WITHOUT ROWID");
     Statement insert(db_, "INSERT INTO meta (key, value) VALUES (?, ?)");
     const std::string resolution = std::to_string(resolution_m_);
     for (const auto& kv : {std::make_pair(std::string("format"), std::string(kFormat)),
@@ -231,7 +233,8 @@ void TileStore::openTables() {
     while (sqlite3_step(read.get()) == SQLITE_ROW)
       meta[columnText(read.get(), 0, "key")] = columnText(read.get(), 1, "value");
   }
-  if (meta["format"] != kFormat) throw std::runtime_error("not a tile database of this version (format '" + meta["format"] + "')");
+  if (meta["format"] != kFormat)
+    throw std::runtime_error("not a tile database of this version (format '" + meta["format"] + "')");
   const double stored_m = parseResolution(meta["resolution_m"]);
   if (resolution_m_ <= 0.0) {
     resolution_m_ = stored_m;
@@ -244,8 +247,9 @@ void TileStore::openTables() {
     if (sqlite3_step(id.get()) == SQLITE_ROW && sqlite3_column_int64(id.get(), 0) == 0) setMissionId();
   }
   if (access_ == Access::kReadWrite)
-    execute("CREATE TABLE IF NOT EXISTS damaged_tiles (x INTEGER NOT NULL, y INTEGER NOT NULL, z INTEGER NOT NULL, "
-            "octree BLOB, reason TEXT NOT NULL)");
+    execute(
+        "CREATE TABLE IF NOT EXISTS damaged_tiles (x INTEGER NOT NULL, y INTEGER NOT NULL, z INTEGER NOT NULL, "
+        "octree BLOB, reason TEXT NOT NULL)");
 }
 
 void TileStore::setMissionId() {
@@ -285,8 +289,9 @@ void TileStore::checkRows() {
 void TileStore::moveAside(const std::vector<std::pair<TileIndex, std::string>>& damaged) {
   // In one transaction: the rows stay for inspection, the map goes on without them.
   execute("BEGIN IMMEDIATE");
-  Statement move(db_, "INSERT INTO damaged_tiles (x, y, z, octree, reason) "
-                      "SELECT x, y, z, octree, ? FROM tiles WHERE x = ? AND y = ? AND z = ?");
+  Statement move(db_,
+                 "INSERT INTO damaged_tiles (x, y, z, octree, reason) "
+                 "SELECT x, y, z, octree, ? FROM tiles WHERE x = ? AND y = ? AND z = ?");
   Statement erase(db_, "DELETE FROM tiles WHERE x = ? AND y = ? AND z = ?");
   for (const auto& [tile, why] : damaged) {
     sqlite3_bind_text(move.get(), 1, why.c_str(), -1, SQLITE_TRANSIENT);
@@ -322,10 +327,10 @@ void TileStore::removeDatabase(const std::string& path) {
   if (sqlite3_exec(db, "PRAGMA locking_mode = EXCLUSIVE; BEGIN EXCLUSIVE", nullptr, nullptr, nullptr) != SQLITE_OK)
     fail(sqlite3_errcode(db) == SQLITE_BUSY ? "locked: another process has it open" : sqlite3_errmsg(db));
   sqlite3_stmt* format = nullptr;
-  const bool ours = sqlite3_prepare_v2(db, "SELECT value FROM meta WHERE key = 'format'", -1, &format, nullptr) ==
-                        SQLITE_OK &&
-                    sqlite3_step(format) == SQLITE_ROW && sqlite3_column_text(format, 0) &&
-                    std::string(reinterpret_cast<const char*>(sqlite3_column_text(format, 0))) == kFormat;
+  const bool ours =
+      sqlite3_prepare_v2(db, "SELECT value FROM meta WHERE key = 'format'", -1, &format, nullptr) == SQLITE_OK &&
+      sqlite3_step(format) == SQLITE_ROW && sqlite3_column_text(format, 0) &&
+      std::string(reinterpret_cast<const char*>(sqlite3_column_text(format, 0))) == kFormat;
   sqlite3_finalize(format);
   if (!ours) fail("it is not a tile database of this version");
   for (const char* suffix : {"", "-wal", "-shm"}) ::unlink((path + suffix).c_str());
@@ -435,7 +440,8 @@ bool TileStore::rowData(const TileIndex& tile, std::string* bytes) const {
   try {
     checkRow(*bytes);
   } catch (const std::runtime_error& e) {
-    throw std::runtime_error("tile database '" + path_ + "': the row of " + tileName(tile) + " is damaged: " + e.what());
+    throw std::runtime_error("tile database '" + path_ + "': the row of " + tileName(tile) +
+                             " is damaged: " + e.what());
   }
   return true;
 }

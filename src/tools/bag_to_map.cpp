@@ -18,9 +18,9 @@
 #include <string>
 #include <vector>
 
+#include "progress.h"
 #include "stereo_occupancy/ros/mapping_pipeline.h"
 #include "stereo_occupancy/ros/parameters.h"
-#include "progress.h"
 
 namespace so = stereo_occupancy;
 using Clock = std::chrono::steady_clock;
@@ -45,7 +45,8 @@ void openBag(const std::string& path, rosbag::Bag* bag) {
   } catch (const rosbag::BagException& e) {
     throw std::runtime_error("cannot read the bag '" + path + "' (" + e.what() +
                              "); if its recording was cut short it has no index: repair it with "
-                             "'rosbag reindex " + path + "' and run again");
+                             "'rosbag reindex " +
+                             path + "' and run again");
   }
 }
 
@@ -55,7 +56,6 @@ struct PendingImage {
   sensor_msgs::ImageConstPtr depth;
   const std_msgs::Header& header() const { return disparity ? disparity->header : depth->header; }
 };
-
 
 }  // namespace
 
@@ -69,12 +69,18 @@ int main(int argc, char** argv) {
       return argv[++i];
     };
     try {
-      if (a == "--bag") bag_path = next();
-      else if (a == "--output") prefix = next();
-      else if (a == "--disparity-topic") disparity_topic = next();
-      else if (a == "--depth-topic") depth_topic = next();
-      else if (a == "--camera-info-topic") info_topic = next();
-      else if (a == "--threads") values["threads"] = next();
+      if (a == "--bag")
+        bag_path = next();
+      else if (a == "--output")
+        prefix = next();
+      else if (a == "--disparity-topic")
+        disparity_topic = next();
+      else if (a == "--depth-topic")
+        depth_topic = next();
+      else if (a == "--camera-info-topic")
+        info_topic = next();
+      else if (a == "--threads")
+        values["threads"] = next();
       else if (a == "--param") {
         const std::string kv = next();
         const auto eq = kv.find('=');
@@ -152,9 +158,8 @@ int main(int argc, char** argv) {
         }
         const auto t0 = Clock::now();
         so::FrameResult result;
-        const so::OccupancyUpdatePtr update =
-            image.disparity ? mapping.map(image.disparity, info, tf, now, &result)
-                            : mapping.mapDepth(image.depth, info, tf, now, &result);
+        const so::OccupancyUpdatePtr update = image.disparity ? mapping.map(image.disparity, info, tf, now, &result)
+                                                              : mapping.mapDepth(image.depth, info, tf, now, &result);
         const auto t1 = Clock::now();
         if (update && !fusion.fuse(*update, &why)) {
           ++fusion_refused;
@@ -192,8 +197,10 @@ int main(int argc, char** argv) {
         ++read;
         PendingImage image;
         try {
-          if (depth_topic.empty()) image.disparity = m.instantiate<stereo_msgs::DisparityImage>();
-          else image.depth = m.instantiate<sensor_msgs::Image>();
+          if (depth_topic.empty())
+            image.disparity = m.instantiate<stereo_msgs::DisparityImage>();
+          else
+            image.depth = m.instantiate<sensor_msgs::Image>();
         } catch (const std::exception& e) {
           std::cerr << "\nbag_to_map: skipped a message on " << m.getTopic() << ": " << e.what() << std::endl;
         }
@@ -222,12 +229,11 @@ int main(int argc, char** argv) {
     const double mapped = static_cast<double>(std::max<uint64_t>(n.mapped, 1));
     std::cout << "{\"images\": " << read << ", \"mapped\": " << n.mapped
               << ", \"dropped_no_pose\": " << queue_dropped + n.no_transform
-              << ", \"refused\": " << unread + n.refused + fusion_refused
-              << ", \"algorithm\": \"" << so::toString(mapper.drawing.algorithm)
-              << "\", \"resolution_m\": " << mapper.drawing.resolution_m
-              << ", \"draw_ms_per_image\": " << mapping_ms / mapped << ", \"fusion_ms_per_image\": " << fusion_ms / mapped
-              << ", \"total_s\": " << total_s << ", \"map\": [\"" << paths[0] << "\", \"" << paths[1] << "\"]}"
-              << std::endl;
+              << ", \"refused\": " << unread + n.refused + fusion_refused << ", \"algorithm\": \""
+              << so::toString(mapper.drawing.algorithm) << "\", \"resolution_m\": " << mapper.drawing.resolution_m
+              << ", \"draw_ms_per_image\": " << mapping_ms / mapped
+              << ", \"fusion_ms_per_image\": " << fusion_ms / mapped << ", \"total_s\": " << total_s << ", \"map\": [\""
+              << paths[0] << "\", \"" << paths[1] << "\"]}" << std::endl;
   } catch (const std::exception& e) {
     std::cerr << "\nbag_to_map: error: " << e.what() << std::endl;
     return 1;

@@ -43,7 +43,6 @@ std::string num(double v, int digits = 2) {
   return o.str();
 }
 
-
 /// The reference of the detection comparison.
 const char* kOctomapName = "OctoMap insertPointCloud";
 
@@ -175,7 +174,8 @@ int run(int argc, char** argv) {
                "Gaussian profile (eqs. 9-10) unless named \"surface\" (the mapper's default). OctoMap: "
                "insertPointCloud of the valid pixels' points (zero disparity has no point), max range 25 m.\n"
             << "Quality within one cell against the ground truth of the mapped frames (surface cells from "
-            << (truth_pixel_step == 1 ? std::string("every pixel") : "every " + std::to_string(truth_pixel_step) + "th pixel")
+            << (truth_pixel_step == 1 ? std::string("every pixel")
+                                      : "every " + std::to_string(truth_pixel_step) + "th pixel")
             << ", empty cells from every 4th).\n\n"
             << "\"frame: surface called free\" counts, over the frames, the cells of each frame's own true "
                "surfaces (every pixel) that the frame's local grid calls free: the drawing alone, before fusion.\n\n"
@@ -190,17 +190,17 @@ int run(int argc, char** argv) {
 
   // Detection range per method, printed last.
   std::ostringstream detection_summary, detection_table;
-  detection_summary << "\nDetection range: for each obstacle (each box of the scene; the ground is none) that the mapped "
-                       "frames see within range, the distance from the camera centre to the obstacle at the first mapped "
-                       "frame after whose fusion an occupied cell lies in its zone: the cells holding its surface "
-                       "points seen in the exact images ("
-                    << (truth_pixel_step == 1 ? std::string("every pixel")
-                                              : "every " + std::to_string(truth_pixel_step) + "th pixel")
-                    << "), with their 26 neighbours, less the cells holding another box's or the ground's "
-                       "surface points. Later / earlier: obstacles this method detects more than one mapped frame "
-                       "later / earlier than OctoMap insertPointCloud, or never / OctoMap never.\n\n"
-                       "| cell | method | obstacles detected | median distance m | min distance m | later than OctoMap | "
-                       "earlier than OctoMap |\n|---|---|---:|---:|---:|---:|---:|\n";
+  detection_summary
+      << "\nDetection range: for each obstacle (each box of the scene; the ground is none) that the mapped "
+         "frames see within range, the distance from the camera centre to the obstacle at the first mapped "
+         "frame after whose fusion an occupied cell lies in its zone: the cells holding its surface "
+         "points seen in the exact images ("
+      << (truth_pixel_step == 1 ? std::string("every pixel") : "every " + std::to_string(truth_pixel_step) + "th pixel")
+      << "), with their 26 neighbours, less the cells holding another box's or the ground's "
+         "surface points. Later / earlier: obstacles this method detects more than one mapped frame "
+         "later / earlier than OctoMap insertPointCloud, or never / OctoMap never.\n\n"
+         "| cell | method | obstacles detected | median distance m | min distance m | later than OctoMap | "
+         "earlier than OctoMap |\n|---|---|---:|---:|---:|---:|---:|\n";
   for (double res : resolutions) {
     const so::ObservedGroundTruth truth = so::observeGroundTruth(truth_flight, res, max_range, 1, 4, truth_pixel_step);
     const so::ObstacleZones zones = so::observeObstacles(truth_flight, res, max_range, 1, truth_pixel_step);
@@ -248,9 +248,10 @@ int run(int argc, char** argv) {
       config.sensor_model.profile = profile;
       so::StereoCameraConfig camera_config = scenario.camera;
       for (const auto& [name, value] : model_values) {
-        if (name == "surface") config.sensor_model.profile = value != 0.0 ? so::SensorProfile::kSurface
-                                                                          : so::SensorProfile::kGaussian;
-        else if (name == "delta_d_px") camera_config.delta_d_px = value;
+        if (name == "surface")
+          config.sensor_model.profile = value != 0.0 ? so::SensorProfile::kSurface : so::SensorProfile::kGaussian;
+        else if (name == "delta_d_px")
+          camera_config.delta_d_px = value;
         else if (!so::setNumberParameter(&config.sensor_model, name, value))
           throw tools::UsageError("--model: unknown name '" + name + "'");
       }
@@ -296,8 +297,7 @@ int run(int argc, char** argv) {
         const octomap::Pointcloud cloud = so::worldPointCloud(images[i], camera, poses[i]);
         const Eigen::Vector3d o = poses[i].translation();
         const auto t1 = Clock::now();
-        tree.insertPointCloud(cloud, octomap::point3d(o.x(), o.y(), o.z()), max_range, /*lazy_eval=*/false,
-                              discretize);
+        tree.insertPointCloud(cloud, octomap::point3d(o.x(), o.y(), o.z()), max_range, /*lazy_eval=*/false, discretize);
         const auto t2 = Clock::now();
         draw.push_back(ms(t0, t1));
         fuse.push_back(ms(t1, t2));
@@ -309,9 +309,10 @@ int run(int argc, char** argv) {
     }
     reportDetections(res, scenario.scene, zones, detections, &detection_summary, &detection_table);
   }
-  std::cout << bands.str() << detection_summary.str()
-            << "\nPer obstacle: the distance [m] at which each method first shows it, and the mapped frame (-: never).\n"
-            << detection_table.str();
+  std::cout
+      << bands.str() << detection_summary.str()
+      << "\nPer obstacle: the distance [m] at which each method first shows it, and the mapped frame (-: never).\n"
+      << detection_table.str();
   return 0;
 }
 

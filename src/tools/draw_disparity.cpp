@@ -186,8 +186,8 @@ int run(int argc, char** argv) {
             << ", \"resolution_m\": " << o.resolution << ", \"coordinate_transfers\": " << stats.coordinate_transfers
             << ", \"used_image_pixels\": " << stats.used_image_pixels
             << ", \"grid_cells_drawn\": " << stats.grid_cells_drawn
-            << ", \"different_grid_cells\": " << stats.different_grid_cells << ", \"grid_size\": [" << size.x()
-            << ", " << size.y() << ", " << size.z() << "]"
+            << ", \"different_grid_cells\": " << stats.different_grid_cells << ", \"grid_size\": [" << size.x() << ", "
+            << size.y() << ", " << size.z() << "]"
             << ", \"grid_cells\": " << grid.numCells() << ", \"occupied_cells\": " << occupied
             << ", \"free_cells\": " << free_cells << ", \"repeat\": " << o.repeat
             << ", \"time_ms\": " << median(times_ms)

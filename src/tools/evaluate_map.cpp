@@ -61,7 +61,8 @@ int run(int argc, char** argv) {
   json += ", \"bands\": {";
   const std::vector<so::RangeBand> bands = so::standardRangeBands();
   for (size_t b = 0; b < bands.size(); ++b)
-    json += (b ? ", \"" : "\"") + bands[b].name() + "\": " + so::evaluateMap(*map, scenario.scene, truth, bands[b]).toJson();
+    json += (b ? ", \"" : "\"") + bands[b].name() +
+            "\": " + so::evaluateMap(*map, scenario.scene, truth, bands[b]).toJson();
   std::cout << json << "}}" << std::endl;
   if (!views_prefix.empty()) {
     cv::Mat top, side;

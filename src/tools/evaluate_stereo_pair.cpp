@@ -115,14 +115,22 @@ int run(int argc, char** argv) {
     if (a == "--help") {
       std::cout << kUsage;
       return 0;
-    } else if (a == "--left") left_file = tools::nextValue(argc, argv, &i);
-    else if (a == "--right") right_file = tools::nextValue(argc, argv, &i);
-    else if (a == "--truth") truth_file = tools::nextValue(argc, argv, &i);
-    else if (a == "--truth-scale") truth_scale = tools::parseNumber(a, tools::nextValue(argc, argv, &i));
-    else if (a == "--focal") focal_full_px = tools::parseNumber(a, tools::nextValue(argc, argv, &i));
-    else if (a == "--baseline") baseline_m = tools::parseNumber(a, tools::nextValue(argc, argv, &i));
-    else if (a == "--max-range") max_range_m = tools::parseNumber(a, tools::nextValue(argc, argv, &i));
-    else if (a == "--shrink") shrink = static_cast<int>(tools::parseWhole(a, tools::nextValue(argc, argv, &i), 1, 16));
+    } else if (a == "--left")
+      left_file = tools::nextValue(argc, argv, &i);
+    else if (a == "--right")
+      right_file = tools::nextValue(argc, argv, &i);
+    else if (a == "--truth")
+      truth_file = tools::nextValue(argc, argv, &i);
+    else if (a == "--truth-scale")
+      truth_scale = tools::parseNumber(a, tools::nextValue(argc, argv, &i));
+    else if (a == "--focal")
+      focal_full_px = tools::parseNumber(a, tools::nextValue(argc, argv, &i));
+    else if (a == "--baseline")
+      baseline_m = tools::parseNumber(a, tools::nextValue(argc, argv, &i));
+    else if (a == "--max-range")
+      max_range_m = tools::parseNumber(a, tools::nextValue(argc, argv, &i));
+    else if (a == "--shrink")
+      shrink = static_cast<int>(tools::parseWhole(a, tools::nextValue(argc, argv, &i), 1, 16));
     else if (a == "--resolution") {
       resolutions.push_back(tools::parseNumber(a, tools::nextValue(argc, argv, &i)));
       if (!(resolutions.back() >= 0.01 && resolutions.back() <= 10.0))
@@ -132,8 +140,10 @@ int run(int argc, char** argv) {
         throw tools::UsageError("--algorithm must be one of " + so::drawingAlgorithmNames());
     } else if (a == "--sgbm") {
       sgbm_name = tools::nextValue(argc, argv, &i);
-      if (sgbm_name == "stereo_image_proc") sgbm = so::SgbmParameters();
-      else if (sgbm_name != "fine") throw tools::UsageError("--sgbm must be fine or stereo_image_proc");
+      if (sgbm_name == "stereo_image_proc")
+        sgbm = so::SgbmParameters();
+      else if (sgbm_name != "fine")
+        throw tools::UsageError("--sgbm must be fine or stereo_image_proc");
     } else if (a == "--model") {
       tools::addNameValue(argc, argv, &i, &model_values);
     } else {

@@ -74,11 +74,13 @@ int run(int argc, char** argv) {
   } else {
     so::writeOcTree(*so::MissionMap::assemble(store, box), out);
   }
-  std::cout << "{\"tiles\": " << store.tiles().size() << ", \"resolution_m\": " << store.resolution()
-            << ", \"out\": \"" << out << "\"}" << std::endl;
+  std::cout << "{\"tiles\": " << store.tiles().size() << ", \"resolution_m\": " << store.resolution() << ", \"out\": \""
+            << out << "\"}" << std::endl;
   return 0;
 }
 
 }  // namespace
 
-int main(int argc, char** argv) { return tools::runTool("export_map", [&] { return run(argc, argv); }); }
+int main(int argc, char** argv) {
+  return tools::runTool("export_map", [&] { return run(argc, argv); });
+}

@@ -152,7 +152,8 @@ int run(int argc, char** argv) {
   const int manager_pid = findProcess(manager);
   if (manager_pid < 0) std::cerr << "load_test: no process named '" << manager << "'; memory not measured" << std::endl;
   const ros::WallTime wait_until = ros::WallTime::now() + ros::WallDuration(20.0);
-  while ((pub.getNumSubscribers() == 0 || sub.getNumPublishers() == 0) && ros::WallTime::now() < wait_until && ros::ok())
+  while ((pub.getNumSubscribers() == 0 || sub.getNumPublishers() == 0) && ros::WallTime::now() < wait_until &&
+         ros::ok())
     ros::WallDuration(0.05).sleep();
   if (pub.getNumSubscribers() == 0) throw std::runtime_error("nobody subscribes to " + disparity_topic);
 
@@ -191,9 +192,10 @@ int run(int argc, char** argv) {
       << " | " << percentile(latency_ms, 0.5) << " | " << percentile(latency_ms, 0.9) << " | "
       << percentile(latency_ms, 0.99) << " | " << percentile(latency_ms, 1.0) << " | " << rss_start << " | "
       << (rss_mib.empty() ? -1.0 : *std::max_element(rss_mib.begin(), rss_mib.end())) << " | " << rss_end << " |";
-  std::cout << "| image | rate Hz | s | published | updates | dropped | latency p50 ms | p90 | p99 | max | "
-               "manager RSS start MiB | max | end |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n"
-            << out.str() << std::endl;
+  std::cout
+      << "| image | rate Hz | s | published | updates | dropped | latency p50 ms | p90 | p99 | max | "
+         "manager RSS start MiB | max | end |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n"
+      << out.str() << std::endl;
   std::cerr << "load_test: RSS every second [MiB]:";
   for (double r : rss_mib) std::cerr << " " << std::setprecision(0) << std::fixed << r;
   std::cerr << std::endl;

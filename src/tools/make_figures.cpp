@@ -60,13 +60,11 @@ class Plot {
   void legend(int row, const std::string& text, const cv::Scalar& colour) {
     const cv::Point p(kWidth - kRight - 250, kTop + 20 + 22 * row);
     cv::line(image_, p, p + cv::Point(30, 0), colour, 2, cv::LINE_AA);
-    cv::putText(image_, text, p + cv::Point(38, 5), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1,
-                cv::LINE_AA);
+    cv::putText(image_, text, p + cv::Point(38, 5), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
   }
 
   void title(const std::string& text) {
-    cv::putText(image_, text, cv::Point(kLeft, 22), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1,
-                cv::LINE_AA);
+    cv::putText(image_, text, cv::Point(kLeft, 22), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
   }
 
   const cv::Mat& image() const { return image_; }
@@ -167,8 +165,8 @@ void figure5(const std::string& path) {
   cv::Mat both(a.rows + 40, a.cols * 2 + 20, CV_8UC3, cv::Scalar(255, 255, 255));
   a.copyTo(both(cv::Rect(0, 40, a.cols, a.rows)));
   b.copyTo(both(cv::Rect(a.cols + 20, 40, b.cols, b.rows)));
-  cv::putText(both, "pyramidal ray tracing, slice at the camera's height", cv::Point(5, 25), cv::FONT_HERSHEY_SIMPLEX, 0.5, kBlack, 1,
-              cv::LINE_AA);
+  cv::putText(both, "pyramidal ray tracing, slice at the camera's height", cv::Point(5, 25), cv::FONT_HERSHEY_SIMPLEX,
+              0.5, kBlack, 1, cv::LINE_AA);
   cv::putText(both, "+ blur, s_trans 0.1 m, s_angle 0.02 rad (eq. 17)", cv::Point(a.cols + 25, 25),
               cv::FONT_HERSHEY_SIMPLEX, 0.5, kBlack, 1, cv::LINE_AA);
   writeImage(path, both);

@@ -20,13 +20,13 @@
 #include <thread>
 #include <vector>
 
+#include "drawing_benchmark.h"
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
 #include "stereo_occupancy/sim/flight_simulation.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
 #include "stereo_occupancy/time_statistics.h"
-#include "drawing_benchmark.h"
 #include "tool_support.h"
 
 namespace so = stereo_occupancy;
@@ -35,9 +35,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-std::string threadsText(int threads) {
-  return threads == 1 ? "one thread" : std::to_string(threads) + " threads";
-}
+std::string threadsText(int threads) { return threads == 1 ? "one thread" : std::to_string(threads) + " threads"; }
 
 struct Timing {
   std::vector<double> ms;  // sorted
@@ -116,8 +114,7 @@ int flightPath(const std::string& scenario_name, long pace_ms, int threads, bool
       return s.str();
     };
     std::cout << "| " << so::toString(algorithm) << (mapper ? ", surface (the mapper's default)" : "") << " | "
-              << stats(ms) << " | " << stats(fusion_ms) << " |"
-              << std::endl;
+              << stats(ms) << " | " << stats(fusion_ms) << " |" << std::endl;
   }
   return 0;
 }
@@ -201,8 +198,8 @@ int run(int argc, char** argv) {
   }
   const double resolution = 0.25;
   if (!quiet)
-    std::cout << frame_name << ": 640x480, b = 0.3 m, f = 700 px, 25 m range, " << resolution
-              << " m cells; " << threadsText(threads) << "; median (min-max) of " << repeat << " runs [ms].\n\n"
+    std::cout << frame_name << ": 640x480, b = 0.3 m, f = 700 px, 25 m range, " << resolution << " m cells; "
+              << threadsText(threads) << "; median (min-max) of " << repeat << " runs [ms].\n\n"
               << "| stage | time ms | what is timed |\n|---|---:|---|\n";
   auto row = [&](const std::string& stage, const Timing& t, const std::string& what) {
     if (!quiet) std::cout << "| " << stage << " | " << t.text() << " | " << what << " |" << std::endl;
@@ -232,8 +229,8 @@ int run(int argc, char** argv) {
     so::tools::applyModelValues(model_values, &config);
     so::DisparityDrawer drawer(camera, config);
     so::LocalGrid grid;
-    const Timing t = timeIt(repeat, [&] { drawer.prepareGrid(T_W_C, &grid); },
-                            [&] { drawer.drawInto(image, T_W_C, &grid); });
+    const Timing t = timeIt(
+        repeat, [&] { drawer.prepareGrid(T_W_C, &grid); }, [&] { drawer.drawInto(image, T_W_C, &grid); });
     std::ostringstream what;
     what << "pyramids + drawing + the surface guards, " << so::toString(config.algorithm)
          << " with the surface profile";
@@ -252,7 +249,9 @@ int run(int argc, char** argv) {
   drawer.drawInto(image, T_W_C, &drawn);
   if (only.empty()) {
     so::LocalGrid grid;
-    row("grid preparation", timeIt(repeat, [] {}, [&] { drawer.prepareGrid(T_W_C, &grid); }),
+    row("grid preparation",
+        timeIt(
+            repeat, [] {}, [&] { drawer.prepareGrid(T_W_C, &grid); }),
         "shape the frustum's box (padded for the blur) and set it unknown; " + std::to_string(drawn.numCells()) +
             " cells");
   }
@@ -261,7 +260,8 @@ int run(int argc, char** argv) {
   double blur_ms = 0.0;
   if (wanted("blur")) {
     so::LocalGrid grid;
-    const Timing t = timeIt(repeat, [&] { grid = drawn; }, [&] { drawer.blur(T_W_C, &grid); });
+    const Timing t = timeIt(
+        repeat, [&] { grid = drawn; }, [&] { drawer.blur(T_W_C, &grid); });
     blur_ms = t.median();
     blurred = grid;
     row("blur", t, "eq. 17 with σ_trans 0.1 m, σ_angle 0.01 rad over the padded grid");
@@ -272,10 +272,11 @@ int run(int argc, char** argv) {
   so::GridUpdate update;
   double encode_ms = 0.0;
   if (wanted("encode")) {
-    const Timing t = timeIt(repeat, [] {}, [&] { so::encodeGridUpdate(blurred, T_W_C.translation(), &update); });
+    const Timing t = timeIt(
+        repeat, [] {}, [&] { so::encodeGridUpdate(blurred, T_W_C.translation(), &update); });
     encode_ms = t.median();
-    row("encode", t, "known cells of the blurred grid into an update (" + std::to_string(update.numCells()) +
-                         " cells)");
+    row("encode", t,
+        "known cells of the blurred grid into an update (" + std::to_string(update.numCells()) + " cells)");
   } else {
     so::encodeGridUpdate(blurred, T_W_C.translation(), &update);
   }
@@ -328,9 +329,8 @@ int run(int argc, char** argv) {
     if (!quiet && line_pyramid_ms > 0.0 && fusion_ms > 0.0) {
       const double ours = line_pyramid_ms + encode_ms + fusion_ms;
       std::cout << "\nOctoMap insertPointCloud / line_pyramid drawing: " << std::fixed << std::setprecision(0)
-                << t.median() / line_pyramid_ms << "x; / (line_pyramid + encode + fusion): "
-                << t.median() / ours << "x; / (line_pyramid + blur + encode + fusion): "
-                << t.median() / (ours + blur_ms) << "x\n";
+                << t.median() / line_pyramid_ms << "x; / (line_pyramid + encode + fusion): " << t.median() / ours
+                << "x; / (line_pyramid + blur + encode + fusion): " << t.median() / (ours + blur_ms) << "x\n";
     }
   }
   return 0;

@@ -11,9 +11,9 @@
 #include <string>
 #include <vector>
 
+#include "drawing_benchmark.h"
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
-#include "drawing_benchmark.h"
 #include "tool_support.h"
 
 namespace so = stereo_occupancy;
@@ -50,8 +50,8 @@ void row(const so::StereoCameraConfig& camera, double resolution, int repeat) {
         tools::timeDrawing(&drawer, image, T_W_C, plain ? 3 : repeat, /*time_grid_preparation=*/false, &grid, &stats);
     stats.different_grid_cells = grid.countKnown();  // the last run's grid, counted outside the timing
     std::ostringstream time;
-    time << std::fixed << std::setprecision(ms[ms.size() / 2] < 10 ? 2 : 0) << ms[ms.size() / 2] << " ("
-         << ms.front() << "-" << ms.back() << ")";
+    time << std::fixed << std::setprecision(ms[ms.size() / 2] < 10 ? 2 : 0) << ms[ms.size() / 2] << " (" << ms.front()
+         << "-" << ms.back() << ")";
     // Line drawing's work is the cells it draws; ray tracing's, the cells of the box it projects.
     const bool line = algorithm == so::DrawingAlgorithm::kLine || algorithm == so::DrawingAlgorithm::kLinePyramid ||
                       algorithm == so::DrawingAlgorithm::kLinePyramidBounded;
@@ -110,9 +110,9 @@ void threadRows(const so::StereoCameraConfig& camera, const std::vector<int>& th
           tools::timeDrawing(&drawer, image, T_W_C, runs, /*time_grid_preparation=*/false, &grid, &stats);
       const double median = blur ? blurMs(&drawer, grid, T_W_C, runs) : ms[ms.size() / 2];
       if (k == 0) first_ms = median;
-      std::cout << "| " << camera.width_px << "x" << camera.height_px << " | " << stage << " | " << threads[k]
-                << " | " << std::fixed << std::setprecision(median < 10 ? 2 : 1) << median << " | "
-                << std::setprecision(2) << first_ms / median << " |" << std::endl;
+      std::cout << "| " << camera.width_px << "x" << camera.height_px << " | " << stage << " | " << threads[k] << " | "
+                << std::fixed << std::setprecision(median < 10 ? 2 : 1) << median << " | " << std::setprecision(2)
+                << first_ms / median << " |" << std::endl;
     }
   }
 }
@@ -154,4 +154,6 @@ int run(int argc, char** argv) {
 
 }  // namespace
 
-int main(int argc, char** argv) { return tools::runTool("scaling", [&] { return run(argc, argv); }); }
+int main(int argc, char** argv) {
+  return tools::runTool("scaling", [&] { return run(argc, argv); });
+}

@@ -20,9 +20,9 @@
 #include <iostream>
 #include <string>
 
+#include "progress.h"
 #include "stereo_occupancy/ros/input_conversions.h"
 #include "stereo_occupancy/sim/flight_simulation.h"
-#include "progress.h"
 #include "tool_support.h"
 
 namespace so = stereo_occupancy;
@@ -52,20 +52,26 @@ int run(int argc, char** argv) {
   so::StereoMatcher matcher = so::StereoMatcher::kGaussian;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--scenario") scenario_name = tools::nextValue(argc, argv, &i);
-    else if (a == "--output") output = tools::nextValue(argc, argv, &i);
-    else if (a == "--seed") seed = static_cast<uint32_t>(tools::parseWhole(a, tools::nextValue(argc, argv, &i), 0, 4294967295L));
-    else if (a == "--frames") frames = tools::parseWhole(a, tools::nextValue(argc, argv, &i), 1, 1000000);
+    if (a == "--scenario")
+      scenario_name = tools::nextValue(argc, argv, &i);
+    else if (a == "--output")
+      output = tools::nextValue(argc, argv, &i);
+    else if (a == "--seed")
+      seed = static_cast<uint32_t>(tools::parseWhole(a, tools::nextValue(argc, argv, &i), 0, 4294967295L));
+    else if (a == "--frames")
+      frames = tools::parseWhole(a, tools::nextValue(argc, argv, &i), 1, 1000000);
     else if (a == "--duration-s") {
       duration_s = tools::parseNumber(a, tools::nextValue(argc, argv, &i));
       if (!(duration_s > 0.0)) throw tools::UsageError("--duration-s expects a positive number of seconds");
-    } else if (a == "--true-depth") true_depth = true;
+    } else if (a == "--true-depth")
+      true_depth = true;
     else if (a == "--matcher") {
       if (!so::parseStereoMatcher(tools::nextValue(argc, argv, &i), &matcher))
         throw tools::UsageError("--matcher must be gaussian or sgbm");
-    }
-    else if (a == "--help") return usage(0);
-    else throw tools::UsageError("unknown option '" + a + "'");
+    } else if (a == "--help")
+      return usage(0);
+    else
+      throw tools::UsageError("unknown option '" + a + "'");
   }
   if (scenario_name.empty() || output.empty()) throw tools::UsageError("--scenario and --output are required");
   if (frames > 0 && duration_s > 0.0) throw tools::UsageError("--frames and --duration-s exclude each other");
@@ -130,8 +136,7 @@ int run(int argc, char** argv) {
   bag.close();
   progress.finish();
   std::cerr << "simulate_flight: " << s.name << " (" << so::toString(s.matcher) << "), " << n << " frames at "
-            << s.frame_rate_hz << " Hz -> "
-            << output << std::endl;
+            << s.frame_rate_hz << " Hz -> " << output << std::endl;
   return 0;
 }
 

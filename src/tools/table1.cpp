@@ -12,10 +12,10 @@
 #include <string>
 #include <vector>
 
+#include "drawing_benchmark.h"
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/sim/disparity_files.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
-#include "drawing_benchmark.h"
 #include "tool_support.h"
 
 namespace so = stereo_occupancy;
@@ -57,7 +57,6 @@ int repeatsFor(so::DrawingAlgorithm a, int base) {
   }
 }
 
-
 int run(int argc, char** argv) {
   int repeat = 50;
   std::string save_image;
@@ -89,8 +88,8 @@ int run(int argc, char** argv) {
 
   std::cout << "Test image: 640x480, " << valid << " valid pixels (" << sky << " sky, zero disparity), "
             << image.total() - valid << " invalid; b = 0.3 m, f = 700 px, dd = 0.5 px, range 25 m.\n"
-            << "Median time of " << repeat << " runs for the pyramidal algorithms, "
-            << std::max(3, repeat / 10) << " for the others (min-max in brackets); one thread; drawing only, no blur.\n\n";
+            << "Median time of " << repeat << " runs for the pyramidal algorithms, " << std::max(3, repeat / 10)
+            << " for the others (min-max in brackets); one thread; drawing only, no blur.\n\n";
   std::cout << "| cell | algorithm | grid cells | coordinate transfers | used image pixels | grid cells drawn | "
                "different grid cells | time [ms] | paper: transfers | pixels | drawn | different | time [ms] |\n"
             << "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
@@ -108,8 +107,8 @@ int run(int argc, char** argv) {
       for (const auto& row : kPaper)
         if (row.resolution == resolution && so::toString(algorithm) == std::string(row.algorithm)) paper = &row;
       std::ostringstream time;
-      time << std::fixed << std::setprecision(median < 10 ? 3 : 1) << median << " (" << ms.front() << "-"
-           << ms.back() << ")";
+      time << std::fixed << std::setprecision(median < 10 ? 3 : 1) << median << " (" << ms.front() << "-" << ms.back()
+           << ")";
       std::cout << "| " << resolution << " m | " << so::toString(algorithm) << " | " << grid.numCells() << " | "
                 << stats.coordinate_transfers << " | " << stats.used_image_pixels << " | " << stats.grid_cells_drawn
                 << " | " << stats.different_grid_cells << " | " << time.str() << " | ";

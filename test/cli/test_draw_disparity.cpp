@@ -72,9 +72,9 @@ TEST(DrawDisparityCli, RoundTripThroughAnOtFile) {
   char pose[200];
   std::snprintf(pose, sizeof(pose), "\"0 0 2 %.12f %.12f %.12f %.12f\"", q.x(), q.y(), q.z(), q.w());
   for (const std::string algorithm : {"line", "line_pyramid", "raytrace", "raytrace_pyramid"}) {
-    const Result r = run("--disparity " + pfm + " --focal 700 --cx 319.5 --cy 239.5 --baseline 0.3 --delta-d 0.5" +
-                         " --pose " + pose + " --resolution 0.25 --max-range 25 --algorithm " + algorithm +
-                         " --repeat 3 --output " + ot);
+    const Result r =
+        run("--disparity " + pfm + " --focal 700 --cx 319.5 --cy 239.5 --baseline 0.3 --delta-d 0.5" + " --pose " +
+            pose + " --resolution 0.25 --max-range 25 --algorithm " + algorithm + " --repeat 3 --output " + ot);
     ASSERT_EQ(r.status, 0) << stderrText();
     EXPECT_NE(r.out.find("\"algorithm\": \"" + algorithm + "\""), std::string::npos) << r.out;
     EXPECT_GT(jsonNumber(r.out, "grid_cells_drawn"), 0) << r.out;
@@ -108,11 +108,11 @@ TEST(DrawDisparityCli, BadArgumentsFailWithOneLine) {
   writePfm(pfm, cv::Mat(48, 64, CV_32FC1, cv::Scalar(5.0f)));
   const std::string ok = "--disparity " + pfm + " --focal 70 --baseline 0.3";
   EXPECT_EQ(run(ok).status, 0) << stderrText();
-  for (const std::string& bad : std::vector<std::string>
-       {std::string("--focal 700 --baseline 0.3"),  // no disparity
-        "--disparity /nonexistent.pfm --focal 700 --baseline 0.3", ok + " --algorithm bresenham",
-        ok + " --resolution abc", ok + " --pose \"1 2 3\"", ok + " --pose \"0 0 0 0 0 0 2\"", ok + " --frobnicate",
-        ok + " --repeat 0", ok + " --output map.txt", "--disparity " + pfm + " --focal -700 --baseline 0.3"}) {
+  for (const std::string& bad : std::vector<std::string>{
+           std::string("--focal 700 --baseline 0.3"),  // no disparity
+           "--disparity /nonexistent.pfm --focal 700 --baseline 0.3", ok + " --algorithm bresenham",
+           ok + " --resolution abc", ok + " --pose \"1 2 3\"", ok + " --pose \"0 0 0 0 0 0 2\"", ok + " --frobnicate",
+           ok + " --repeat 0", ok + " --output map.txt", "--disparity " + pfm + " --focal -700 --baseline 0.3"}) {
     const Result r = run(bad);
     ASSERT_TRUE(WIFEXITED(r.status)) << bad;
     EXPECT_EQ(WEXITSTATUS(r.status), 2) << bad;

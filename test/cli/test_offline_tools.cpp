@@ -7,9 +7,9 @@
 #include <octomap/OcTree.h>
 
 #include <array>
-#include <map>
 #include <cstdio>
 #include <cstdlib>
+#include <map>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -62,9 +62,9 @@ TEST(OfflineTools, CompareWithOctomapScoresEveryMethod) {
   // cell, method, draw ms, fusion ms, total ms, precision %, recall %, F1, phantom %, called free %, coverage %, ...
   enum { kDrawMs = 2, kTotalMs = 4, kPrecision = 5, kRecall = 6, kF1 = 7, kPhantom = 8, kCalledFree = 9 };
   std::map<std::string, std::vector<double>> rows;
-  for (const char* method : {"line", "line_pyramid", "raytrace", "raytrace_pyramid", "line_pyramid_bounded",
-                             "line_pyramid_bounded, surface", "OctoMap insertPointCloud",
-                             "OctoMap insertPointCloud, discretize"}) {
+  for (const char* method :
+       {"line", "line_pyramid", "raytrace", "raytrace_pyramid", "line_pyramid_bounded", "line_pyramid_bounded, surface",
+        "OctoMap insertPointCloud", "OctoMap insertPointCloud, discretize"}) {
     const std::vector<std::string> cells = tableRow(r.out, "1 m", method);
     ASSERT_GE(cells.size(), 11u) << method << "\n" << r.out;
     std::vector<double>& values = rows[method];
@@ -139,8 +139,11 @@ TEST(OfflineTools, SgbmFlightThroughTheTools) {
   for (const std::string matcher : {"sgbm", "gaussian"}) {
     const std::string bag = dir + "offline_" + matcher + ".bag";
     ASSERT_EQ(run(std::string(SIMULATE_FLIGHT_EXE) + " --scenario posts_far --matcher " + matcher +
-                  " --frames 20 --output " + bag).status, 0);
-    const Result mapped = run(std::string(BAG_TO_MAP_EXE) + " --bag " + bag + " --output " + dir + "offline_" + matcher);
+                  " --frames 20 --output " + bag)
+                  .status,
+              0);
+    const Result mapped =
+        run(std::string(BAG_TO_MAP_EXE) + " --bag " + bag + " --output " + dir + "offline_" + matcher);
     ASSERT_EQ(mapped.status, 0) << mapped.out;
     EXPECT_EQ(jsonNumber(mapped.out, "mapped"), 20);
     const Result score = run(std::string(EVALUATE_MAP_EXE) + " --map " + dir + "offline_" + matcher +
@@ -152,8 +155,9 @@ TEST(OfflineTools, SgbmFlightThroughTheTools) {
   EXPECT_GT(jsonNumber(scores["sgbm"], "occupied_recall"), 0.9) << scores["sgbm"];
   EXPECT_NE(jsonNumber(scores["sgbm"], "occupied_cells"), jsonNumber(scores["gaussian"], "occupied_cells"));
 
-  const Result r = run(std::string(COMPARE_OCTOMAP_EXE) +
-                       " --scenario posts_far --matcher sgbm --frame-step 50 --resolution 1.0 --algorithm line_pyramid_bounded");
+  const Result r =
+      run(std::string(COMPARE_OCTOMAP_EXE) +
+          " --scenario posts_far --matcher sgbm --frame-step 50 --resolution 1.0 --algorithm line_pyramid_bounded");
   ASSERT_EQ(r.status, 0);
   EXPECT_NE(r.out.find("matcher sgbm: StereoSGBM: 64 disparities"), std::string::npos) << r.out;
   const auto section = r.out.find("Detection range:");
@@ -189,7 +193,10 @@ TEST(OfflineTools, FiguresAreWritten) {
 TEST(OfflineTools, SimulateMapAndScoreAFlight) {
   const std::string dir = ::testing::TempDir();
   const std::string bag = dir + "offline_posts.bag";
-  ASSERT_EQ(run(std::string(SIMULATE_FLIGHT_EXE) + " --scenario posts --frames 30 --seed 3 --true-depth --output " + bag).status, 0);
+  ASSERT_EQ(
+      run(std::string(SIMULATE_FLIGHT_EXE) + " --scenario posts --frames 30 --seed 3 --true-depth --output " + bag)
+          .status,
+      0);
 
   const Result mapped = run(std::string(BAG_TO_MAP_EXE) + " --bag " + bag + " --output " + dir + "offline_posts");
   ASSERT_EQ(mapped.status, 0) << mapped.out;
@@ -203,7 +210,8 @@ TEST(OfflineTools, SimulateMapAndScoreAFlight) {
   ASSERT_NE(post, nullptr);
   EXPECT_TRUE(map.isNodeOccupied(post));
 
-  const Result score = run(std::string(EVALUATE_MAP_EXE) + " --map " + dir + "offline_posts.bt --scenario posts --frames 30");
+  const Result score =
+      run(std::string(EVALUATE_MAP_EXE) + " --map " + dir + "offline_posts.bt --scenario posts --frames 30");
   ASSERT_EQ(score.status, 0) << score.out;
   // Within one cell, most occupied cells lie at a true surface and nearly every
   // observed surface cell is found; almost none is called free.

@@ -4,8 +4,8 @@
 
 #include <gtest/gtest.h>
 #include <rosbag/bag.h>
-#include <sensor_msgs/Image.h>
 #include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
 #include <stereo_msgs/DisparityImage.h>
 #include <sys/wait.h>
 #include <tf2_msgs/TFMessage.h>
@@ -19,8 +19,8 @@
 #include <vector>
 
 #include "stereo_occupancy/ros/input_conversions.h"
-#include "stereo_occupancy/store/tile_store.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
+#include "stereo_occupancy/store/tile_store.h"
 
 namespace so = stereo_occupancy;
 
@@ -69,10 +69,11 @@ TEST(ToolErrors, EvaluateMap) {
                tool + " --map x.bt --scenario posts --max-range -3", tool + " --map x.bt --scenario mars",
                tool + " --map x.bt --scenario posts --frobnicate", tool + " --map x.bt --scenario posts --views"},
               2);
-  expectError("evaluate_map",
-              {tool + " --map /nonexistent/map.bt --scenario posts", tool + " --map " + kTmp + "garbage.bt --scenario posts",
-               tool + " --map " + kTmp + "garbage.ot --scenario posts"},
-              1);
+  expectError(
+      "evaluate_map",
+      {tool + " --map /nonexistent/map.bt --scenario posts", tool + " --map " + kTmp + "garbage.bt --scenario posts",
+       tool + " --map " + kTmp + "garbage.ot --scenario posts"},
+      1);
 }
 
 TEST(ToolErrors, SimulateFlight) {
@@ -88,12 +89,13 @@ TEST(ToolErrors, SimulateFlight) {
 
 TEST(ToolErrors, BenchmarksAndFigures) {
   const std::string compare = COMPARE_OCTOMAP_EXE, table1 = TABLE1_EXE, figures = MAKE_FIGURES_EXE;
-  expectError("compare_octomap",
-              {compare + " --scenario mars", compare + " --frame-step x", compare + " --frame-step 0",
-               compare + " --resolution 0", compare + " --resolution nan", compare + " --truth-pixel-step",
-               compare + " --model p_hot=0.7 --frame-step 100", compare + " --map clamping_min_prob=0.7 --frame-step 100",
-               compare + " --matcher census", compare + " --matcher"},
-              2);
+  expectError(
+      "compare_octomap",
+      {compare + " --scenario mars", compare + " --frame-step x", compare + " --frame-step 0",
+       compare + " --resolution 0", compare + " --resolution nan", compare + " --truth-pixel-step",
+       compare + " --model p_hot=0.7 --frame-step 100", compare + " --map clamping_min_prob=0.7 --frame-step 100",
+       compare + " --matcher census", compare + " --matcher"},
+      2);
   const std::string pair = EVALUATE_STEREO_PAIR_EXE;
   expectError("evaluate_stereo_pair",
               {pair + " --shrink 0", pair + " --resolution 0", pair + " --model p_hot=0.7", pair + " --frobnicate",
@@ -103,12 +105,12 @@ TEST(ToolErrors, BenchmarksAndFigures) {
   expectError("table1", {table1 + " --repeat 0", table1 + " --repeat x", table1 + " --frobnicate"}, 2);
   expectError("scaling", {std::string(SCALING_EXE) + " --repeat 0", std::string(SCALING_EXE) + " --frobnicate"}, 2);
   const std::string performance = PERFORMANCE_EXE;
-  expectError("performance",
-              {performance + " --repeat 0", performance + " --only warp_drive", performance + " --scenario mars",
-               performance + " --scenario posts --frame 100000", performance + " --flight mars",
-               performance + " --pace-ms 100", performance + " --flight posts --pace-ms -1",
-               performance + " --frobnicate"},
-              2);
+  expectError(
+      "performance",
+      {performance + " --repeat 0", performance + " --only warp_drive", performance + " --scenario mars",
+       performance + " --scenario posts --frame 100000", performance + " --flight mars", performance + " --pace-ms 100",
+       performance + " --flight posts --pace-ms -1", performance + " --frobnicate"},
+      2);
   expectError("make_figures", {figures + " a b", figures + " --frobnicate"}, 2);
   expectError("make_figures", {figures + " /nonexistent/dir"}, 1);
 }
@@ -122,7 +124,8 @@ TEST(ToolErrors, BagToMapArgumentsAndFiles) {
                tool + " --bag x.bag --output y --frobnicate"},
               2);
   expectError("bag_to_map",
-              {tool + " --bag /nonexistent.bag --output " + kTmp + "m", tool + " --bag " + kTmp + "garbage.bag --output " + kTmp + "m"},
+              {tool + " --bag /nonexistent.bag --output " + kTmp + "m",
+               tool + " --bag " + kTmp + "garbage.bag --output " + kTmp + "m"},
               1);
 }
 
@@ -162,7 +165,8 @@ struct Table1Frames {
   /// The pose at the stamps of the first @p frames frames, for /tf.
   tf2_msgs::TFMessage poses(int frames) const {
     tf2_msgs::TFMessage tf;
-    for (int k = 0; k < frames; ++k) tf.transforms.push_back(so::toTransformMsg(T_W_C, stamp(k), "map", "camera_optical"));
+    for (int k = 0; k < frames; ++k)
+      tf.transforms.push_back(so::toTransformMsg(T_W_C, stamp(k), "map", "camera_optical"));
     return tf;
   }
   /// Frame @p k's disparity image.
@@ -228,11 +232,12 @@ TEST(ToolErrors, BagToMapSkipsHostileImages) {
 TEST(ToolErrors, ExportMap) {
   const std::string tool = EXPORT_MAP_EXE;
   writeFile(kTmp + "not_tiles.db", "this is not a database, only text that is long enough to be read as one\n");
-  expectError("export_map",
-              {tool, tool + " --database x.db", tool + " --database x.db --out y.txt",
-               tool + " --database x.db --out y.bt --min 0 0 0", tool + " --database x.db --out y.bt --min 1 1 1 --max 0 0 0",
-               tool + " --database x.db --out y.bt --min a b c --max 1 1 1", tool + " --frobnicate"},
-              2);
+  expectError(
+      "export_map",
+      {tool, tool + " --database x.db", tool + " --database x.db --out y.txt",
+       tool + " --database x.db --out y.bt --min 0 0 0", tool + " --database x.db --out y.bt --min 1 1 1 --max 0 0 0",
+       tool + " --database x.db --out y.bt --min a b c --max 1 1 1", tool + " --frobnicate"},
+      2);
   expectError("export_map",
               {tool + " --database /nonexistent/m.db --out " + kTmp + "e.bt",
                tool + " --database " + kTmp + "not_tiles.db --out " + kTmp + "e.bt"},
@@ -304,8 +309,8 @@ TEST(ToolErrors, ExportMapOnlyReadsAndRefusesADamagedRow) {
     so::TileStore store(damaged, 0.25);
     for (int x = 0; x < 2; ++x) {
       so::MapAccumulator::Leaf leaf;
-      leaf.key = octomap::OcTreeKey(static_cast<octomap::key_type>(32768 + x * so::MapAccumulator::kTileCells), 32768,
-                                    32768);
+      leaf.key =
+          octomap::OcTreeKey(static_cast<octomap::key_type>(32768 + x * so::MapAccumulator::kTileCells), 32768, 32768);
       leaf.depth = so::MapAccumulator::kTileDepth + 2;
       leaf.log_odds = 1.0f;
       store.put(so::MapAccumulator::TileIndex(x, 0, 0), {leaf});
@@ -313,7 +318,10 @@ TEST(ToolErrors, ExportMapOnlyReadsAndRefusesADamagedRow) {
     ASSERT_TRUE(store.flush());
   }
   ASSERT_EQ(run("sqlite3 -version").status, 0) << "the test needs the sqlite3 command (Debian's sqlite3)";
-  ASSERT_EQ(run("sqlite3 " + damaged + " \"UPDATE tiles SET octree = substr(octree, 1, length(octree) - 5) WHERE x = 1\"").status, 0);
+  ASSERT_EQ(
+      run("sqlite3 " + damaged + " \"UPDATE tiles SET octree = substr(octree, 1, length(octree) - 5) WHERE x = 1\"")
+          .status,
+      0);
   for (const char* ext : {".ot", ".bt"}) {
     const std::string out = kTmp + "cut_row_export" + ext;
     std::remove(out.c_str());

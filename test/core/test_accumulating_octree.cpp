@@ -83,8 +83,8 @@ TEST(AccumulatingOcTree, LeafUpdaterEqualsUpdateNode) {
           for (int i = 0; i < 8; ++i) {
             block[i] = rng() % 4 == 0 ? std::numeric_limits<float>::quiet_NaN() : values[rng() % 6];
             if (block[i] == block[i])
-              plain.updateNode(octomap::OcTreeKey(o + x + (i & 1), o + y + ((i >> 1) & 1), o + z + (i >> 2)),
-                               block[i], true);
+              plain.updateNode(octomap::OcTreeKey(o + x + (i & 1), o + y + ((i >> 1) & 1), o + z + (i >> 2)), block[i],
+                               true);
           }
           updater.addSiblings(octomap::OcTreeKey(o + x, o + y, o + z), block);
         }
@@ -99,8 +99,7 @@ TEST(AccumulatingOcTree, LeafUpdaterEqualsUpdateNode) {
   AccumulatingOcTree::LeafUpdater updater(&fast);
   for (int i = 0; i < 20000; ++i) {
     const int spread = i % 2 ? 40 : 40000;
-    const octomap::OcTreeKey key(o - spread / 2 + rng() % spread, o - spread / 2 + rng() % spread,
-                                 o - 5 + rng() % 10);
+    const octomap::OcTreeKey key(o - spread / 2 + rng() % spread, o - spread / 2 + rng() % spread, o - 5 + rng() % 10);
     const float value = values[rng() % 6];
     updater.add(key, value);
     plain.updateNode(key, value, true);
@@ -139,8 +138,8 @@ TEST(AccumulatingOcTree, SiblingsWalkOnFromAPrunedNode) {
   updater.addSiblings(first, block);
   for (int i = 0; i < 8; ++i)
     if (block[i] == block[i])
-      plain.updateNode(octomap::OcTreeKey(first[0] + (i & 1), first[1] + ((i >> 1) & 1), first[2] + (i >> 2)),
-                       block[i], true);
+      plain.updateNode(octomap::OcTreeKey(first[0] + (i & 1), first[1] + ((i >> 1) & 1), first[2] + (i >> 2)), block[i],
+                       true);
   EXPECT_GT(plain.getNumLeafNodes(), 2u) << "the pruned block was not expanded";
   EXPECT_EQ(fullTree(fast), fullTree(plain));
 }

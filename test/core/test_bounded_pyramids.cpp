@@ -20,9 +20,9 @@ constexpr double kCell = 0.25;
 
 /// How an algorithm drew the cells of one obstacle, and the cells beside it.
 struct ObstacleCells {
-  int cells = 0;     ///< cells the obstacle passes through (in view)
-  int occupied = 0;  ///< of those, with log-odds > 0
-  int free = 0;      ///< of those, with log-odds < 0
+  int cells = 0;            ///< cells the obstacle passes through (in view)
+  int occupied = 0;         ///< of those, with log-odds > 0
+  int free = 0;             ///< of those, with log-odds < 0
   int beside_occupied = 0;  ///< occupied cells at the obstacle's depth but 1-2 cells beside it
 };
 
@@ -173,7 +173,7 @@ TEST(DisparityBlockBound, FaithfulWhereTheFarProfileIsOccupied) {
     EXPECT_TRUE(bound.isFaithful(d(z_far), d(z_far - 0.97 * u)));
     EXPECT_FALSE(bound.isFaithful(d(z_far), d(z_far - 1.03 * u)));
   }
-  EXPECT_NEAR(reach(20.0), 0.79, 0.03);  // Δz(20 m) = 0.95 m: about 0.67 Δz + c/2
+  EXPECT_NEAR(reach(20.0), 0.79, 0.03);             // Δz(20 m) = 0.95 m: about 0.67 Δz + c/2
   EXPECT_FALSE(bound.isFaithful(d(20.0), d(8.0)));  // the post before the wall
   EXPECT_TRUE(bound.isFaithful(0.0f, 0.0f));        // all sky
   EXPECT_TRUE(bound.isFaithful(0.0f, d(30.0)));     // sky and beyond the range: free to the range

@@ -120,7 +120,7 @@ TEST(DisparityPyramid, Level0IsSanitised) {
   for (auto size : {cv::Size(64, 48), cv::Size(641, 479), cv::Size(37, 5), cv::Size(7, 3), cv::Size(1, 1)}) {
     for (int top : {3, 0}) {
       cv::Mat img = randomDisparity(size.width, size.height, 1);
-      for (int y = 0; y < img.rows; ++y)  // zero with the sign bit in odd columns: kept as it is, and
+      for (int y = 0; y < img.rows; ++y)       // zero with the sign bit in odd columns: kept as it is, and
         for (int x = 1; x < img.cols; x += 2)  // a block of +0 and -0 reduces to its first
           if (img.at<float>(y, x) == 0.0f) img.at<float>(y, x) = -0.0f;
       DisparityPyramid min_pyr, max_pyr;
@@ -200,7 +200,7 @@ TEST(PyramidLevelTable, LevelChoiceObeysEq13) {
       const int i = table.levelForDisparity(d);
       if (i == table.topLevel() || i == table.minLevel()) continue;  // clamped
       const double z = cam.depthFromDisparity(d);
-      const double dp = z * std::ldexp(1.0, i) / 700.0;  // eq. 12
+      const double dp = z * std::ldexp(1.0, i) / 700.0;       // eq. 12
       ASSERT_GT(dp, 0.5 * c) << "d=" << d << " level " << i;  // eq. 13
       ASSERT_LE(dp, c) << "d=" << d << " level " << i;
       ASSERT_EQ(table.levelForDepth(z), i);

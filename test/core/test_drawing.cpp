@@ -12,8 +12,8 @@
 #include <tuple>
 
 #include "stereo_occupancy/disparity_drawer.h"
-#include "stereo_occupancy/surface_guards.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
+#include "stereo_occupancy/surface_guards.h"
 
 using namespace stereo_occupancy;
 
@@ -177,7 +177,8 @@ TEST(Drawing, FrontoParallelWall) {
                 found = occupied[b].count({std::get<0>(k) + dx, std::get<1>(k) + dy, std::get<2>(k) + dz2}) > 0;
           missing += !found;
         }
-        EXPECT_LE(missing, occupied[a].size() / 1000) << toString(a) << " vs " << toString(b) << ": " << occupied[a].size() << " cells";
+        EXPECT_LE(missing, occupied[a].size() / 1000)
+            << toString(a) << " vs " << toString(b) << ": " << occupied[a].size() << " cells";
       }
   }
 }
@@ -357,21 +358,21 @@ TEST_F(LineDrawing, LineCellsCarryTheModelValue) {
     const double l_end = std::min<double>(profile.endRange(), 25.0);
     size_t checked = 0;
     for (size_t i = 0; i < grid.numCells(); ++i) {
-          const float value = grid.data()[i];
-          if (value == LocalGrid::kUnknown) continue;
-          const int x = static_cast<int>(i % 220), y = static_cast<int>(i / 220 % 220), z = static_cast<int>(i / 48400);
-          const double l = (grid.cellCentre(x, y, z)[m] - origin[m]) / dir[m];
-          if (l <= 0.0 || l >= l_end) continue;  // the first and last cell sample the segment's end
-          ASSERT_NEAR(value, profile.at(static_cast<float>(l)), 2e-3) << "trial " << trial << " l " << l;
-          // The cell is the one the ray crosses on its slab's centre plane.
-          const Eigen::Vector3d on_ray = g0 + dir * (l / 0.25);
-          const Eigen::Vector3i cell(x, y, z);
-          for (int axis = 0; axis < 3; ++axis)
-            if (axis != m) {
-              ASSERT_EQ(cell[axis], static_cast<int>(std::floor(on_ray[axis]))) << "trial " << trial;
-            }
-          ++checked;
+      const float value = grid.data()[i];
+      if (value == LocalGrid::kUnknown) continue;
+      const int x = static_cast<int>(i % 220), y = static_cast<int>(i / 220 % 220), z = static_cast<int>(i / 48400);
+      const double l = (grid.cellCentre(x, y, z)[m] - origin[m]) / dir[m];
+      if (l <= 0.0 || l >= l_end) continue;  // the first and last cell sample the segment's end
+      ASSERT_NEAR(value, profile.at(static_cast<float>(l)), 2e-3) << "trial " << trial << " l " << l;
+      // The cell is the one the ray crosses on its slab's centre plane.
+      const Eigen::Vector3d on_ray = g0 + dir * (l / 0.25);
+      const Eigen::Vector3i cell(x, y, z);
+      for (int axis = 0; axis < 3; ++axis)
+        if (axis != m) {
+          ASSERT_EQ(cell[axis], static_cast<int>(std::floor(on_ray[axis]))) << "trial " << trial;
         }
+      ++checked;
+    }
     ASSERT_GE(checked + 2, n);
   }
 }
@@ -382,8 +383,8 @@ TEST_F(LineDrawing, LineLeavingTheGridSkipsOutsideCells) {
   grid.reset(Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(10, 10, 10), 0.25);  // 2.5 m
   // The obstacle lies 8 m out, far outside the grid.
   const RangeProfile obstacle = table.profile(8.0f, static_cast<float>(cam.depthUncertainty(8.0)));
-  const uint64_t written = drawer.drawRay(Eigen::Vector3d(0.3, 1.2, 1.2), Eigen::Vector3d(1, 0.1, 0).normalized(),
-                                          obstacle, &grid);
+  const uint64_t written =
+      drawer.drawRay(Eigen::Vector3d(0.3, 1.2, 1.2), Eigen::Vector3d(1, 0.1, 0).normalized(), obstacle, &grid);
   EXPECT_EQ(grid.countKnown(), written);
   EXPECT_LE(written, 10u);
   EXPECT_GE(written, 8u);
@@ -404,7 +405,8 @@ TEST(Drawing, TinyPositiveDisparitiesAreInfinitelyFar) {
   StereoCameraConfig cam_cfg;
   const StereoCameraModel cam(cam_cfg);
   const Eigen::Isometry3d T = testPoses()[1];
-  for (float tiny : {1e-6f, 1e-20f, 1e-30f, std::numeric_limits<float>::min(), std::numeric_limits<float>::denorm_min()}) {
+  for (float tiny :
+       {1e-6f, 1e-20f, 1e-30f, std::numeric_limits<float>::min(), std::numeric_limits<float>::denorm_min()}) {
     const cv::Mat image(480, 640, CV_32FC1, cv::Scalar(tiny));
     for (DrawingAlgorithm a : kAll) {
       DisparityDrawer drawer(cam_cfg, config(a, 0.5));
@@ -502,8 +504,8 @@ TEST(Drawing, ThreadCountsDrawTheSameGrids) {
         LocalGrid a, b;
         const DrawStatistics sa = one.draw(frames.images[p], frames.poses[p], &a);
         const DrawStatistics sb = many.draw(frames.images[p], frames.poses[p], &b);
-        const std::string what = std::string(toString(algorithm)) + " threads " + std::to_string(threads) +
-                                 " pose " + std::to_string(p);
+        const std::string what =
+            std::string(toString(algorithm)) + " threads " + std::to_string(threads) + " pose " + std::to_string(p);
         EXPECT_GT(sa.different_grid_cells, 20000u) << what;
         EXPECT_EQ(sb.coordinate_transfers, sa.coordinate_transfers) << what;
         EXPECT_EQ(sb.used_image_pixels, sa.used_image_pixels) << what;
@@ -534,8 +536,8 @@ TEST(Drawing, ThreadCountsDrawTheSameDefaultGrids) {
         LocalGrid a, b;
         one.draw(frames.images[p], frames.poses[p], &a);
         many.draw(frames.images[p], frames.poses[p], &b);
-        const std::string what = "guard " + std::to_string(guard) + " threads " + std::to_string(threads) +
-                                 " pose " + std::to_string(p);
+        const std::string what =
+            "guard " + std::to_string(guard) + " threads " + std::to_string(threads) + " pose " + std::to_string(p);
         ASSERT_EQ(b.numCells(), a.numCells()) << what;
         EXPECT_EQ(std::memcmp(b.data(), a.data(), a.numCells() * sizeof(float)), 0) << what;
       }

@@ -53,13 +53,13 @@ TEST(DistanceDependentBlur, ConstantSigmaIsAGaussian) {
   LocalGrid g = impulseGrid(15, 0.25, {{7, 7, 7}}, 2.0f);
   blur.apply(Eigen::Vector3d(0, 0, 0), &g);
   const std::vector<float> k = blur.kernel(2);  // σ = 2 · 0.5 cells
-  ASSERT_EQ(k.size(), 7u);                       // radius ceil(3σ) = 3
+  ASSERT_EQ(k.size(), 7u);                      // radius ceil(3σ) = 3
   EXPECT_NEAR(k[3], 1.0 / (std::sqrt(2 * M_PI) * (1 - 2 * 0.00135)), 3e-3);
   EXPECT_NEAR(g.at(7, 7, 7), 2.0 * k[3] * k[3] * k[3], 1e-5);
   EXPECT_NEAR(g.at(8, 7, 7), 2.0 * k[4] * k[3] * k[3], 1e-5);
   EXPECT_NEAR(g.at(8, 9, 6), 2.0 * k[4] * k[5] * k[2], 1e-5);
   EXPECT_NEAR(sum(g, 0, 14, 0, 14, 0, 14), 2.0, 1e-4);  // mass is kept away from the border
-  EXPECT_EQ(g.at(0, 0, 0), LocalGrid::kUnknown);          // out of the kernel's reach: still unknown
+  EXPECT_EQ(g.at(0, 0, 0), LocalGrid::kUnknown);        // out of the kernel's reach: still unknown
 }
 
 TEST(DistanceDependentBlur, FartherCellsAreBlurredMore) {
@@ -114,9 +114,9 @@ void referenceBlur(DistanceDependentBlur* blur, const Eigen::Vector3d& W_camera,
         const size_t i = grid->linearIndex(x, y, z);
         const Eigen::Vector3d d = grid->cellCentre(x, y, z) - W_camera;
         const double sx = d.x() * d.x(), syz = d.y() * d.y() + d.z() * d.z();
-        const double steps = std::sqrt(cfg.sigma_trans_m * cfg.sigma_trans_m +
-                                       (sx + syz) * cfg.sigma_angle_rad * cfg.sigma_angle_rad) /
-                             (c * cfg.sigma_step_cells);
+        const double steps =
+            std::sqrt(cfg.sigma_trans_m * cfg.sigma_trans_m + (sx + syz) * cfg.sigma_angle_rad * cfg.sigma_angle_rad) /
+            (c * cfg.sigma_step_cells);
         const int max_steps = static_cast<int>(BlurConfig::kMaxSigmaCells / cfg.sigma_step_cells);
         q[i] = steps >= max_steps ? max_steps : static_cast<int>(steps + 0.5);
         const float v = grid->data()[i];

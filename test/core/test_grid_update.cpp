@@ -20,7 +20,7 @@ TEST(GridUpdate, EncodesKnownCellsAsRuns) {
   LocalGrid grid;
   grid.reset(Eigen::Vector3i(10, 20, 30), Eigen::Vector3i(4, 3, 2), 0.5);
   for (int x = 1; x < 4; ++x) grid.at(x, 1, 0) = 0.5f;  // one run of 3
-  grid.at(0, 0, 1) = -0.2f;                              // a run of 1
+  grid.at(0, 0, 1) = -0.2f;                             // a run of 1
   GridUpdate u;
   encodeGridUpdate(grid, Eigen::Vector3d(1, 2, 3), &u);
   EXPECT_EQ(u.run_start, (std::vector<uint32_t>{5, 12}));

@@ -150,8 +150,8 @@ TEST(HostileUpdates, AFullWidthRowDoesNotOverflow) {
     if (!ok) {  // the child's own report: the parent sees only its exit status
       std::fprintf(stderr, "%zu blocks visited, expected 2:\n", seen.size());
       for (const auto& [g, v] : seen)
-        std::fprintf(stderr, "  (%d, %d, %d): %g %g %g %g %g %g %g %g\n", g.x(), g.y(), g.z(), v[0], v[1], v[2],
-                     v[3], v[4], v[5], v[6], v[7]);
+        std::fprintf(stderr, "  (%d, %d, %d): %g %g %g %g %g %g %g %g\n", g.x(), g.y(), g.z(), v[0], v[1], v[2], v[3],
+                     v[4], v[5], v[6], v[7]);
     }
     return ok;
   };

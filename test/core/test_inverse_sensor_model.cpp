@@ -31,9 +31,9 @@ TEST(InverseSensorModel, FreeInFrontUnknownFarBehind) {
   const InverseSensorModel m = fig1Model();
   for (double lp : {10.0, 20.0, 40.0}) {
     const double dl = deltaL(lp);
-    EXPECT_NEAR(m.probability(lp - 8.0 * dl, lp, dl), 0.35, 1e-9) << lp;    // free space is p_min
-    EXPECT_NEAR(m.probability(lp + 8.0 * dl, lp, dl), 0.5, 1e-9) << lp;     // unknown behind
-    EXPECT_GT(m.probability(lp + 0.5 * dl, lp, dl), 0.5) << lp;             // still occupied just behind
+    EXPECT_NEAR(m.probability(lp - 8.0 * dl, lp, dl), 0.35, 1e-9) << lp;     // free space is p_min
+    EXPECT_NEAR(m.probability(lp + 8.0 * dl, lp, dl), 0.5, 1e-9) << lp;      // unknown behind
+    EXPECT_GT(m.probability(lp + 0.5 * dl, lp, dl), 0.5) << lp;              // still occupied just behind
     EXPECT_NEAR(m.logOdds(lp - 8.0 * dl, lp, dl), logit(0.35), 1e-9) << lp;  // eq. 8
   }
   EXPECT_NEAR(m.freeLogOdds(), logit(0.35), 1e-12);

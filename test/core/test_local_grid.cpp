@@ -76,9 +76,9 @@ TEST(LocalGrid, ResetOnWorkersMarksEveryCellUnknown) {
   for (unsigned threads : {2u, 3u}) {
     WorkerPool pool(threads);
     LocalGrid grid;
-    for (const Eigen::Vector3i& size : {Eigen::Vector3i(100, 90, 80), Eigen::Vector3i(101, 97, 83),
-                                       Eigen::Vector3i(90, 90, 70), Eigen::Vector3i(64, 64, 64),
-                                       Eigen::Vector3i(3, 2, 1), Eigen::Vector3i(101, 97, 83)}) {
+    for (const Eigen::Vector3i& size :
+         {Eigen::Vector3i(100, 90, 80), Eigen::Vector3i(101, 97, 83), Eigen::Vector3i(90, 90, 70),
+          Eigen::Vector3i(64, 64, 64), Eigen::Vector3i(3, 2, 1), Eigen::Vector3i(101, 97, 83)}) {
       std::fill(grid.data(), grid.data() + grid.numCells(), 0.5f);  // what the last image drew
       grid.reset(Eigen::Vector3i(-7, 3, 11), size, 0.25, &pool);
       ASSERT_EQ(grid.size(), size);
@@ -93,8 +93,17 @@ TEST(LocalGrid, ResetOnWorkersMarksEveryCellUnknown) {
 // say what their definitions say, for one telling value at each of the 16
 // places in a block of unknown or of 0, and for blocks with none.
 TEST(LocalGrid, BlockTestsMatchTheirDefinitions) {
-  const float values[] = {LocalGrid::kUnknown, 0.0f, -0.0f, 0.4f, -0.4f, 1e-30f, -1e-30f, 1e-40f, -1e-40f,
-                          std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(),
+  const float values[] = {LocalGrid::kUnknown,
+                          0.0f,
+                          -0.0f,
+                          0.4f,
+                          -0.4f,
+                          1e-30f,
+                          -1e-30f,
+                          1e-40f,
+                          -1e-40f,
+                          std::numeric_limits<float>::infinity(),
+                          -std::numeric_limits<float>::infinity(),
                           std::numeric_limits<float>::quiet_NaN()};
   int checked = 0;
   for (float background : {LocalGrid::kUnknown, 0.0f})

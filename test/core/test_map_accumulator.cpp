@@ -114,7 +114,7 @@ TEST(MapAccumulator, PruneKeepsTheMapWithinItsExtent) {
   MapAccumulator map(cfg);
   ASSERT_TRUE(map.integrate(singleCell(Eigen::Vector3i(0, 0, 0), 1.0f)));
   ASSERT_TRUE(map.integrate(singleCell(Eigen::Vector3i(200, 0, 0), 1.0f)));  // seen from 50 m away
-  EXPECT_EQ(map.prune(), 0u);  // both near a recent origin
+  EXPECT_EQ(map.prune(), 0u);                                                // both near a recent origin
   // The vehicle stays near the origin for kPruneOrigins updates: the cell
   // at 50 m goes, the ones near it stay.
   GridUpdate near = singleCell(Eigen::Vector3i(4, 0, 0), 1.0f);

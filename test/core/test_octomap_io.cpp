@@ -52,8 +52,7 @@ namespace {
 /// A tree with occupied and free leaves at several depths, some pruned.
 octomap::OcTree sampleTree() {
   octomap::OcTree tree(0.25);
-  for (int i = 0; i < 200; ++i)
-    tree.updateNode(0.3 * (i % 17) - 2.0, 0.25 * (i % 13), 0.5 * (i % 5) - 1.0, i % 3 != 0);
+  for (int i = 0; i < 200; ++i) tree.updateNode(0.3 * (i % 17) - 2.0, 0.25 * (i % 13), 0.5 * (i % 5) - 1.0, i % 3 != 0);
   for (int i = 0; i < 64; ++i)  // a free block that prunes to one coarse leaf
     tree.updateNode(8.0 + 0.25 * (i % 4), 8.0 + 0.25 * ((i / 4) % 4), 8.0 + 0.25 * (i / 16), false);
   tree.updateInnerOccupancy();

@@ -22,8 +22,8 @@ TEST(ProjectedMap, ColumnsInTheBand) {
   EXPECT_DOUBLE_EQ(map.resolution_m, 0.5);
   EXPECT_DOUBLE_EQ(map.origin_x_m, 0.0);
   EXPECT_DOUBLE_EQ(map.origin_y_m, 0.0);
-  ASSERT_EQ(map.width, 5);   // x in [0, 2.5)
-  ASSERT_EQ(map.height, 3);  // y in [0, 1.5)
+  ASSERT_EQ(map.width, 5);                           // x in [0, 2.5)
+  ASSERT_EQ(map.height, 3);                          // y in [0, 1.5)
   EXPECT_EQ(map.at(0, 0), ProjectedMap::kOccupied);  // occupied wins over the free cell above it
   EXPECT_EQ(map.at(2, 0), ProjectedMap::kOccupied);
   EXPECT_EQ(map.at(4, 0), ProjectedMap::kUnknown);  // only a cell above the band

@@ -192,8 +192,7 @@ class Reference {
   /// (a square of side c·f / z), where a block that sticks out of the
   /// footprint and that DisparityBlockBound does not call faithful is
   /// replaced by its children, down to level i - 2. -1: no valid pixel.
-  double boundedFootprintMax(const cv::Mat& d, const DisparityBlockBound& bound, double z, double u,
-                             double v) const {
+  double boundedFootprintMax(const cv::Mat& d, const DisparityBlockBound& bound, double z, double u, double v) const {
     const int i = std::clamp(static_cast<int>(std::floor(std::log2(c_ * cfg_.focal_length_px / z))), 0, topLevel());
     const double r = 0.5 * c_ * cfg_.focal_length_px / z;
     const double x_lo = std::max(u + 0.5 - r, 0.0), x_hi = std::min(u + 0.5 + r, static_cast<double>(d.cols));
@@ -210,7 +209,8 @@ class Reference {
       double m = -1.0;
       for (int cy = 2 * by; cy <= 2 * by + 1 && (cy << (j - 1)) < d.rows; ++cy)
         for (int cx = 2 * bx; cx <= 2 * bx + 1 && (cx << (j - 1)) < d.cols; ++cx)
-          if (overlaps(cx, j - 1, x_lo, x_hi) && overlaps(cy, j - 1, y_lo, y_hi)) m = std::max(m, leaves(j - 1, cx, cy));
+          if (overlaps(cx, j - 1, x_lo, x_hi) && overlaps(cy, j - 1, y_lo, y_hi))
+            m = std::max(m, leaves(j - 1, cx, cy));
       return m;
     };
     double m = -1.0;
@@ -264,14 +264,14 @@ class Reference {
             const int yb = behind ? d.rows - 1 : std::min(d.rows - 1, static_cast<int>(std::floor(v1 + 0.5)));
             for (int yy = ya; yy <= yb; ++yy)
               for (int xx = xa; xx <= xb; ++xx)
-                if (cam_.isValidDisparity(d.at<float>(yy, xx))) d_hat = std::max(d_hat, static_cast<double>(d.at<float>(yy, xx)));
+                if (cam_.isValidDisparity(d.at<float>(yy, xx)))
+                  d_hat = std::max(d_hat, static_cast<double>(d.at<float>(yy, xx)));
           }
           if (d_hat < 0.0) continue;  // no information in the footprint
           const double value = profile(u, v, d_hat).value(l);
           if (!std::isnan(value)) grid->at(x, y, z) = static_cast<float>(value);
         }
   }
-
 
   /// Cells next to a line's tie on a cell border (see drawLine).
   mutable std::set<size_t> ties;
@@ -290,8 +290,7 @@ struct Comparison {
   size_t value_differs = 0;  ///< cells known in both, values apart by more than the tolerance
   double max_difference = 0.0;
 };
-Comparison compare(const LocalGrid& drawn, const LocalGrid& reference, double tolerance,
-                   const std::set<size_t>& ties) {
+Comparison compare(const LocalGrid& drawn, const LocalGrid& reference, double tolerance, const std::set<size_t>& ties) {
   Comparison out;
   for (size_t i = 0; i < drawn.numCells(); ++i) {
     if (ties.count(i)) continue;
@@ -325,8 +324,8 @@ TEST(ReferenceImplementation, PaperAlgorithmsMatchCellByCell) {
   Eigen::Isometry3d T_table1;
   const cv::Mat image = table1Image(StereoCameraModel(camera), &T_table1);
   Eigen::Isometry3d T_turned = lookingAlongX(Eigen::Vector3d(0.3, -0.7, 2.4), 0.35, 0.2);
-  for (const auto& [T_W_C, resolution] : {std::make_pair(T_table1, 0.5), std::make_pair(T_turned, 0.5),
-                                           std::make_pair(T_turned, 0.25)}) {
+  for (const auto& [T_W_C, resolution] :
+       {std::make_pair(T_table1, 0.5), std::make_pair(T_turned, 0.5), std::make_pair(T_turned, 0.25)}) {
     for (DrawingAlgorithm algorithm : {DrawingAlgorithm::kLine, DrawingAlgorithm::kLinePyramid,
                                        DrawingAlgorithm::kRayTrace, DrawingAlgorithm::kRayTracePyramid}) {
       DrawingConfig config;
@@ -339,17 +338,25 @@ TEST(ReferenceImplementation, PaperAlgorithmsMatchCellByCell) {
       reference.clear();
       const Reference ref(camera, config);
       switch (algorithm) {
-        case DrawingAlgorithm::kLine: ref.line(image, T_W_C, &reference); break;
-        case DrawingAlgorithm::kLinePyramid: ref.linePyramid(image, T_W_C, &reference); break;
-        case DrawingAlgorithm::kRayTrace: ref.rayTrace(image, T_W_C, false, &reference); break;
-        default: ref.rayTrace(image, T_W_C, true, &reference); break;
+        case DrawingAlgorithm::kLine:
+          ref.line(image, T_W_C, &reference);
+          break;
+        case DrawingAlgorithm::kLinePyramid:
+          ref.linePyramid(image, T_W_C, &reference);
+          break;
+        case DrawingAlgorithm::kRayTrace:
+          ref.rayTrace(image, T_W_C, false, &reference);
+          break;
+        default:
+          ref.rayTrace(image, T_W_C, true, &reference);
+          break;
       }
       const Comparison c = compare(drawn, reference, kValueTolerance, ref.ties);
       SCOPED_TRACE(std::string(toString(algorithm)) + " at " + std::to_string(resolution) + " m");
-      std::printf("%-16s %.2f m: known %zu (ties left out: %zu), known in one only %zu, values apart %zu, "
-                  "max difference %.4f\n",
-                  toString(algorithm), resolution, c.known, ref.ties.size(), c.only_one, c.value_differs,
-                  c.max_difference);
+      std::printf(
+          "%-16s %.2f m: known %zu (ties left out: %zu), known in one only %zu, values apart %zu, "
+          "max difference %.4f\n",
+          toString(algorithm), resolution, c.known, ref.ties.size(), c.only_one, c.value_differs, c.max_difference);
       EXPECT_GT(c.known, 2000u);
       EXPECT_LT(static_cast<double>(ref.ties.size()), kMaxTieShare * c.known);
       // Identical cells; values within the table's error.
@@ -376,8 +383,8 @@ TEST(ReferenceImplementation, BoundedAlgorithmsMatchCellByCell) {
   // Turned off the grid's axes: the Table I pose looks along x from a cell
   // border, so the block centres' rays run along cell borders (ties).
   const Eigen::Isometry3d T_turned = lookingAlongX(Eigen::Vector3d(0.3, -0.7, 2.4), 0.35, 0.2);
-  for (const Case& k : {Case{&table1, T_turned, 0.5}, Case{&table1, T_table1, 0.25},
-                        Case{&flight, posts.cameraPose(100), 0.5}}) {
+  for (const Case& k :
+       {Case{&table1, T_turned, 0.5}, Case{&table1, T_table1, 0.25}, Case{&flight, posts.cameraPose(100), 0.5}}) {
     for (DrawingAlgorithm algorithm :
          {DrawingAlgorithm::kLinePyramidBounded, DrawingAlgorithm::kRayTracePyramidBounded}) {
       DrawingConfig config;
@@ -398,10 +405,10 @@ TEST(ReferenceImplementation, BoundedAlgorithmsMatchCellByCell) {
       }
       const Comparison c = compare(drawn, reference, kValueTolerance, ref.ties);
       SCOPED_TRACE(std::string(toString(algorithm)) + " at " + std::to_string(k.resolution) + " m");
-      std::printf("%-24s %.2f m: known %zu (ties left out: %zu), known in one only %zu, values apart %zu, "
-                  "max difference %.4f\n",
-                  toString(algorithm), k.resolution, c.known, ref.ties.size(), c.only_one, c.value_differs,
-                  c.max_difference);
+      std::printf(
+          "%-24s %.2f m: known %zu (ties left out: %zu), known in one only %zu, values apart %zu, "
+          "max difference %.4f\n",
+          toString(algorithm), k.resolution, c.known, ref.ties.size(), c.only_one, c.value_differs, c.max_difference);
       EXPECT_GT(c.known, 2000u);
       EXPECT_LT(static_cast<double>(ref.ties.size()), kMaxTieShare * c.known);
       EXPECT_EQ(c.only_one, 0u);

@@ -129,7 +129,7 @@ TEST(SurfaceGuards, BothGuardsAtOnceAreTheGapGuardThenTheSkyGuard) {
     }
   LocalGrid one_guard = drawn;
   EXPECT_GT(applySurfaceGuards(&one_guard, skyAndGap(sky, 1, free, 1)), 100u);  // zeros freed
-  EXPECT_GT(silenceNearOccupied(&drawn, sky, 1), 100u);                // and sky silenced: both guards act here
+  EXPECT_GT(silenceNearOccupied(&drawn, sky, 1), 100u);  // and sky silenced: both guards act here
 }
 
 // Both guards against a plain reference on random grids with runs of
@@ -234,8 +234,8 @@ TEST(SurfaceGuards, SkyGuardOnWorkersMatchesAPlainGuard) {
       for (unsigned threads : {1u, 2u, 3u, 5u}) {
         WorkerPool pool(threads);
         LocalGrid guarded = grid;
-        const std::string what = "z " + std::to_string(size_z) + " radius " + std::to_string(radius) + " threads " +
-                                 std::to_string(threads);
+        const std::string what =
+            "z " + std::to_string(size_z) + " radius " + std::to_string(radius) + " threads " + std::to_string(threads);
         EXPECT_EQ(silenceNearOccupied(&guarded, kSky, radius, &pool), expected) << what;
         EXPECT_EQ(std::memcmp(guarded.data(), plain.data(), plain.numCells() * sizeof(float)), 0) << what;
       }

@@ -17,9 +17,9 @@
 #include <vector>
 
 #include "stereo_occupancy/disparity_drawer.h"
+#include "stereo_occupancy/sim/synthetic_scene.h"
 #include "stereo_occupancy/surface_guards.h"
 #include "stereo_occupancy/worker_pool.h"
-#include "stereo_occupancy/sim/synthetic_scene.h"
 
 using namespace stereo_occupancy;
 
@@ -84,17 +84,17 @@ TEST(SurfaceProfile, ExactModelAndTableAgree) {
   const LogOddsTable table(model, kCell);
   const double l_p = 15.0, dl = 0.6;
   EXPECT_NEAR(model.logOddsHat(l_p, l_p, dl, kCell), logit(0.68), 1e-12);
-  EXPECT_NEAR(model.logOddsHat(l_p - 0.12, l_p, dl, kCell), logit(0.68), 1e-12);   // the window holds l_p
+  EXPECT_NEAR(model.logOddsHat(l_p - 0.12, l_p, dl, kCell), logit(0.68), 1e-12);  // the window holds l_p
   EXPECT_NEAR(model.logOddsHat(l_p + 0.12, l_p, dl, kCell), logit(0.68), 1e-12);
-  EXPECT_EQ(model.logOddsHat(l_p - 0.125 - 0.3, l_p, dl, kCell), 0.0);             // in the gap (0.6 m)
+  EXPECT_EQ(model.logOddsHat(l_p - 0.125 - 0.3, l_p, dl, kCell), 0.0);                   // in the gap (0.6 m)
   EXPECT_NEAR(model.logOddsHat(l_p - 0.125 - 0.61, l_p, dl, kCell), logit(0.3), 1e-12);  // before it
-  EXPECT_EQ(model.logOddsHat(l_p + 0.2, l_p, dl, kCell), 0.0);                     // behind: nothing
+  EXPECT_EQ(model.logOddsHat(l_p + 0.2, l_p, dl, kCell), 0.0);                           // behind: nothing
   const RangeProfile profile = table.profile(static_cast<float>(l_p), static_cast<float>(dl));
   EXPECT_NEAR(profile.endRange(), l_p + 0.125 + dl / LogOddsTable::kSamplesPerSigma, 1e-5);
   for (double l = l_p - 3.5; l <= profile.endRange(); l += 0.013) {
     const double e = l < l_p - 0.125 ? l - l_p + 0.125 : (l > l_p + 0.125 ? l - l_p - 0.125 : 0.0);
     if (e != 0.0 && std::abs(e) < dl / 32.0) continue;  // within one table sample of the window's edge
-    if (std::abs(e + dl) < dl / 32.0) continue;                          // ... of the gap's start
+    if (std::abs(e + dl) < dl / 32.0) continue;         // ... of the gap's start
     EXPECT_NEAR(profile.at(static_cast<float>(l)), model.logOddsHat(l, l_p, dl, kCell), 1e-4) << l;
   }
   // A ray without a range (zero disparity): p_sky, by default p_free.
@@ -467,7 +467,7 @@ TEST(SurfaceProfile, BoundedPyramidKeepsAPostBeforeAWall) {
 // stays. The matcher's noise is what splits the ground's blocks.
 TEST(SurfaceProfile, SpansDrawTheDescentsOccupiedCellsWritingFewer) {
   SyntheticScene scene;
-  scene.addBox({-5.0, -40.0, -1.0}, {60.0, 40.0, 0.0});  // the ground
+  scene.addBox({-5.0, -40.0, -1.0}, {60.0, 40.0, 0.0});   // the ground
   scene.addBox({20.1, -20.0, -5.0}, {22.0, 20.0, 10.0});  // a wall
   scene.addBox({14.9, -0.1, 0.0}, {15.1, 0.1, 4.0});      // a post before it
   for (const Eigen::Isometry3d& T_W_C :

@@ -8,8 +8,8 @@
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
-#include <string>
 #include <stdexcept>
+#include <string>
 
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/grid_update.h"

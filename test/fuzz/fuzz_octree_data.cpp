@@ -47,13 +47,17 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size == 0) return 0;
   const std::string bytes(reinterpret_cast<const char*>(data) + 1, size - 1);
   switch (data[0] % 3) {
-    case 0: fuzzData(bytes, so::OcTreeEncoding::kFull); break;
-    case 1: fuzzData(bytes, so::OcTreeEncoding::kBinary); break;
+    case 0:
+      fuzzData(bytes, so::OcTreeEncoding::kFull);
+      break;
+    case 1:
+      fuzzData(bytes, so::OcTreeEncoding::kBinary);
+      break;
     default: {
       // A header OctoMap writes, then the fuzzer's data: the walk sees past it quickly.
       const bool binary = data[0] % 2 == 0;
-      fuzzFile(std::string(binary ? "# Octomap OcTree binary file\n" : "# Octomap OcTree file\n") +
-               "id OcTree\nsize " + std::to_string(size % 1000) + "\nres 0.1\ndata\n" + bytes);
+      fuzzFile(std::string(binary ? "# Octomap OcTree binary file\n" : "# Octomap OcTree file\n") + "id OcTree\nsize " +
+               std::to_string(size % 1000) + "\nres 0.1\ndata\n" + bytes);
       fuzzFile(bytes);
       break;
     }

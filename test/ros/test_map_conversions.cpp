@@ -150,14 +150,13 @@ TEST(Conversions, BlockMarkers) {
   tree.updateNode(octomap::point3d(0.375f, 0.125f, 0.125f), false);  // free: not drawn
   // Block (1, 0, 0): cells (16..17, 0..1, 0..1) occupied, pruned to one leaf of 2 cells a side.
   for (int i = 0; i < 8; ++i)
-    tree.updateNode(octomap::point3d(4.125f + 0.25f * (i & 1), 0.125f + 0.25f * ((i >> 1) & 1),
-                                     0.125f + 0.25f * (i >> 2)),
-                    true);
+    tree.updateNode(
+        octomap::point3d(4.125f + 0.25f * (i & 1), 0.125f + 0.25f * ((i >> 1) & 1), 0.125f + 0.25f * (i >> 2)), true);
   // Cells (32..63)^3 occupied, pruned to one leaf of 32 cells a side: blocks (2..3, 2..3, 2..3).
   for (int i = 0; i < 32 * 32 * 32; ++i)
-    tree.updateNode(octomap::point3d(8.125f + 0.25f * (i % 32), 8.125f + 0.25f * ((i / 32) % 32),
-                                     8.125f + 0.25f * (i / 1024)),
-                    true);
+    tree.updateNode(
+        octomap::point3d(8.125f + 0.25f * (i % 32), 8.125f + 0.25f * ((i / 32) % 32), 8.125f + 0.25f * (i / 1024)),
+        true);
   tree.prune();
   std::multiset<double> leaf_sides;
   for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) leaf_sides.insert(it.getSize());
@@ -165,8 +164,8 @@ TEST(Conversions, BlockMarkers) {
   std_msgs::Header header;
   header.frame_id = "map";
   visualization_msgs::MarkerArray markers;
-  blockMarkers(tree, {Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(1, 0, 0), Eigen::Vector3i(3, 2, 2),
-                      Eigen::Vector3i(5, 5, 5)},
+  blockMarkers(tree,
+               {Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(1, 0, 0), Eigen::Vector3i(3, 2, 2), Eigen::Vector3i(5, 5, 5)},
                true, header, &markers);
   ASSERT_EQ(markers.markers.size(), 5u);
   EXPECT_EQ(markers.markers[0].action, visualization_msgs::Marker::DELETEALL);
@@ -189,7 +188,8 @@ TEST(Conversions, BlockMarkers) {
   EXPECT_EQ(coarse.ns, "occupied_cells_z0");
   EXPECT_NE(coarse.id, single.id);
   std::set<std::array<double, 3>> eight;
-  for (int i = 0; i < 8; ++i) eight.insert({16.0 + (i & 1), static_cast<double>((i >> 1) & 1), static_cast<double>(i >> 2)});
+  for (int i = 0; i < 8; ++i)
+    eight.insert({16.0 + (i & 1), static_cast<double>((i >> 1) & 1), static_cast<double>(i >> 2)});
   EXPECT_EQ(cellsOf(coarse), eight);
   // The 32-cell leaf: the 16^3 cells of block (3, 2, 2) that it covers, and no others.
   const auto& part = markers.markers[3];
@@ -221,8 +221,8 @@ TEST(Conversions, FreeBlockMarkers) {
   std_msgs::Header header;
   header.frame_id = "map";
   visualization_msgs::MarkerArray markers;
-  freeBlockMarkers(tree, {Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(2, 0, 0), Eigen::Vector3i(5, 5, 5)}, false,
-                   header, &markers);
+  freeBlockMarkers(tree, {Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(2, 0, 0), Eigen::Vector3i(5, 5, 5)}, false, header,
+                   &markers);
   ASSERT_EQ(markers.markers.size(), 15u);  // 3 blocks, 5 sizes
   const auto& fine = markers.markers[0];
   EXPECT_EQ(fine.ns, "free_cells_z0_s1");
@@ -241,8 +241,8 @@ TEST(Conversions, FreeBlockMarkers) {
   // hands out a coarse leaf that ends just before the box).
   octomap::OcTree beside(0.25);
   for (int i = 0; i < 512; ++i)
-    beside.updateNode(octomap::point3d(10.125f + 0.25f * (i % 8), 0.125f + 0.25f * ((i / 8) % 8), 0.125f + 0.25f * (i / 64)),
-                      false);
+    beside.updateNode(
+        octomap::point3d(10.125f + 0.25f * (i % 8), 0.125f + 0.25f * ((i / 8) % 8), 0.125f + 0.25f * (i / 64)), false);
   beside.prune();
   ASSERT_EQ(beside.getNumLeafNodes(), 1u);
   for (const auto& b : {Eigen::Vector3i(1, 0, 0), Eigen::Vector3i(3, 0, 0)}) {

@@ -143,8 +143,7 @@ TEST_F(PipelineTest, ACameraInfoThatDisagreesIsSaidAndCounted) {
   full_size->width = 1280;
   full_size->height = 960;
   ASSERT_TRUE(mapping.map(frame(11.0), full_size, tf_, ros::Time(11.0), &result)) << result.why;
-  EXPECT_NE(result.info_mismatch.find("camera_info is 1280 x 960 px, the disparity image 640 x 480"),
-            std::string::npos)
+  EXPECT_NE(result.info_mismatch.find("camera_info is 1280 x 960 px, the disparity image 640 x 480"), std::string::npos)
       << result.info_mismatch;
   EXPECT_NE(result.info_mismatch.find("(319.500000, 239.500000) px is"), std::string::npos) << result.info_mismatch;
   auto unrectified = boost::make_shared<sensor_msgs::CameraInfo>(*info);
@@ -352,7 +351,8 @@ TEST_F(PipelineTest, EveryNumberParameterAtTheEndsOfItsRangeMapsOrRefuses) {
   // The accumulator's ends, each fusing the default mapper's update.
   FrameMapping mapping{DisparityMapperParameters()};
   FrameResult result;
-  const OccupancyUpdatePtr update = mapping.map(frame(stamp_s + 1.0), nullptr, tf_, ros::Time(stamp_s + 1.001), &result);
+  const OccupancyUpdatePtr update =
+      mapping.map(frame(stamp_s + 1.0), nullptr, tf_, ros::Time(stamp_s + 1.001), &result);
   ASSERT_TRUE(update) << result.why;
   for (const auto& [name, value] : rangeEnds<OctomapAccumulatorParameters>()) {
     DisparityMapperParameters mapper;

@@ -310,9 +310,10 @@ std::map<std::string, std::string> launchParams(const std::string& args) {
 // they leave the config's values; given, they win.
 TEST(LaunchFile, ArgsNotGivenLeaveTheConfigsValues) {
   std::string yaml = readFile(std::string(SOURCE_DIR) + "/config/mapping.yaml");
-  for (const auto& [from, to] : {std::make_pair(std::string("world_frame: map "), std::string("world_frame: odom ")),
-                                 std::make_pair(std::string("save_dir: \"\""), std::string("save_dir: /tmp/my_maps")),
-                                 std::make_pair(std::string("map_file: \"\""), std::string("map_file: /tmp/my_map.ot"))}) {
+  for (const auto& [from, to] :
+       {std::make_pair(std::string("world_frame: map "), std::string("world_frame: odom ")),
+        std::make_pair(std::string("save_dir: \"\""), std::string("save_dir: /tmp/my_maps")),
+        std::make_pair(std::string("map_file: \"\""), std::string("map_file: /tmp/my_map.ot"))}) {
     size_t at = 0, replaced = 0;
     while ((at = yaml.find(from, at)) != std::string::npos) yaml.replace(at, from.size(), to), ++replaced;
     ASSERT_GT(replaced, 0u) << "config/mapping.yaml has no '" << from << "'";
@@ -364,8 +365,11 @@ TEST(Parameters, FromNameValuePairs) {
   DisparityMapperParameters mapper;
   OctomapAccumulatorParameters accumulator;
   std::string why;
-  ASSERT_TRUE(loadParameters({{"algorithm", "raytrace"}, {"resolution_m", "0.5"}, {"use_depth", "true"},
-                              {"queue_size", "7"}, {"map_name", "flight"}},
+  ASSERT_TRUE(loadParameters({{"algorithm", "raytrace"},
+                              {"resolution_m", "0.5"},
+                              {"use_depth", "true"},
+                              {"queue_size", "7"},
+                              {"map_name", "flight"}},
                              &mapper, &accumulator, &why))
       << why;
   EXPECT_EQ(mapper.drawing.algorithm, DrawingAlgorithm::kRayTrace);

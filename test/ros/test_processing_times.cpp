@@ -77,8 +77,8 @@ TEST(ProcessingTimes, CpuTimeLeavesOutTheWaits) {
   times.stop(start);
   const TimeStatistics cpu = times.cpuStatistics();
   ASSERT_EQ(cpu.count, 2u);
-  EXPECT_LT(cpu.min_ms, 10.0);  // the sleep
-  EXPECT_GE(cpu.max_ms, 30.0);  // the busy loop
+  EXPECT_LT(cpu.min_ms, 10.0);                 // the sleep
+  EXPECT_GE(cpu.max_ms, 30.0);                 // the busy loop
   EXPECT_GE(times.statistics().min_ms, 30.0);  // both took at least 30 ms of wall time
 }
 

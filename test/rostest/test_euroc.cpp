@@ -211,7 +211,6 @@ std::vector<Frame> readFrames(const std::string& set) {
 
 // ---------------------------------------------------------------- messages
 
-
 /// A calibrated camera's camera_info: the raw camera (K, D) and its
 /// rectification (R, P) as cv::stereoRectify gives them.
 sensor_msgs::CameraInfoPtr infoMsg(const Camera& camera, const cv::Mat& R, const cv::Mat& P,
@@ -513,8 +512,7 @@ TEST_F(EurocTest, TheHoverGrowsNoPhantoms) {
       "occupied after %zu frames %zu, after all %zu (%.2f %%; OctoMap %zu, %.2f %%)\n",
       hover_.size(), mapping_s, kFirstFew, first_few.size(), occupied.size(), growth, octomap_first_few.size(),
       octomap_occupied.size(), octomap_growth, later_frames, seen_through, kFirstFew, occupied_after_first_few,
-      occupied_after_all, 100.0 * seen_through_occupied, octomap_seen_through_occupied,
-      100.0 * octomap_seen_through);
+      occupied_after_all, 100.0 * seen_through_occupied, octomap_seen_through_occupied, 100.0 * octomap_seen_through);
   EXPECT_GT(first_few.size(), kMinCellsCompared) << "the first frames mapped (almost) nothing";
   EXPECT_LE(growth, kMaxHoverGrowth);
   EXPECT_GT(seen_through, kMinCellsCompared);

@@ -4,16 +4,16 @@
 // comes or floods. The manager must live, the map stay as it was, the
 // counters move.
 
+#include <diagnostic_msgs/DiagnosticArray.h>
 #include <gtest/gtest.h>
 #include <ros/master.h>
 #include <ros/network.h>
 #include <ros/ros.h>
-#include <xmlrpcpp/XmlRpcClient.h>
-#include <diagnostic_msgs/DiagnosticArray.h>
 #include <rosgraph_msgs/Log.h>
 #include <std_srvs/Trigger.h>
 #include <stereo_msgs/DisparityImage.h>
 #include <tf2_ros/transform_broadcaster.h>
+#include <xmlrpcpp/XmlRpcClient.h>
 
 #include <signal.h>
 #include <sys/mount.h>
@@ -240,10 +240,10 @@ TEST_F(HostileTest, HostileUpdatesLeaveTheMapAndTheManagerAndAFullDiskKeepsTheFi
 
   // The attacks of issue 21, each refused.
   std::vector<OccupancyUpdate> hostile = {
-      claimedBox({0, 0, 0}, {1, 16384, 16384}, {12345}),                     // 99 bytes claiming 268 M cells
-      claimedBox({-32768, -32768, -32768}, {1, 65535, 65535}, {0}),            // 4.3 G cells
-      claimedBox({0, 0, 0}, {kIntMax, 1, 1}, {0, kIntMax - 1}),                // width + 1 overflowed
-      claimedBox({static_cast<int>(kIntMax), 0, 0}, {kIntMax, 1, 1},           // origin + local wrapped
+      claimedBox({0, 0, 0}, {1, 16384, 16384}, {12345}),              // 99 bytes claiming 268 M cells
+      claimedBox({-32768, -32768, -32768}, {1, 65535, 65535}, {0}),   // 4.3 G cells
+      claimedBox({0, 0, 0}, {kIntMax, 1, 1}, {0, kIntMax - 1}),       // width + 1 overflowed
+      claimedBox({static_cast<int>(kIntMax), 0, 0}, {kIntMax, 1, 1},  // origin + local wrapped
                  {kIntMax - 4, kIntMax - 3, kIntMax - 2, kIntMax - 1}),
       claimedBox({static_cast<int>(kIntMax) - 100, 0, 0}, {100, 1, 1}, {96, 97, 98, 99}),  // beyond the key range
   };
@@ -285,8 +285,8 @@ TEST_F(HostileTest, HostileUpdatesLeaveTheMapAndTheManagerAndAFullDiskKeepsTheFi
   update_pub_.publish(goodUpdate(Eigen::Vector3i(20000, 0, 8)));
   ros::WallDuration(0.5).sleep();
   update_pub_.publish(goodUpdate(Eigen::Vector3i(0, 0, 8)));  // a callback after the prune period: prunes
-  ASSERT_TRUE(waitFor([&] { return diag_[kAccumulator]["updates received"] == std::to_string(2 + hostile.size() + 2); },
-                      20.0));
+  ASSERT_TRUE(
+      waitFor([&] { return diag_[kAccumulator]["updates received"] == std::to_string(2 + hostile.size() + 2); }, 20.0));
   saved = save();
   ASSERT_TRUE(saved.response.success) << saved.response.message;
   const std::string after_far = readFile(ot_path);
@@ -420,11 +420,14 @@ TEST_F(HostileTest, BadStampsAndTfNeitherStopNorMisplaceTheMapping) {
     ros::WallDuration(0.5).sleep();
   }
   stopSpam();
-  EXPECT_TRUE(waitFor([&] {
-    for (const auto& w : warnings_)
-      if (w.find("world_frame 'never_published_world' does not exist in tf") != std::string::npos) return true;
-    return false;
-  }, 5.0)) << "no warning that the world frame is missing";
+  EXPECT_TRUE(waitFor(
+      [&] {
+        for (const auto& w : warnings_)
+          if (w.find("world_frame 'never_published_world' does not exist in tf") != std::string::npos) return true;
+        return false;
+      },
+      5.0))
+      << "no warning that the world frame is missing";
 
   ASSERT_TRUE(waitFor([&] { return !diag_[kMapper]["dropped: no transform"].empty(); }, 5.0));
   EXPECT_EQ(diag(kMapper, "time jumps back"), "0");

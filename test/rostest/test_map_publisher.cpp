@@ -53,7 +53,9 @@ class MapPublisherTest : public ::testing::Test {
       std::lock_guard<std::mutex> lock(test_mutex_);
       messages->push_back(msg);
     });
-    EXPECT_TRUE(waitFor(test_mutex_, [&] { return sub.getNumPublishers() > 0; }, 10.0)) << topic;
+    EXPECT_TRUE(waitFor(
+        test_mutex_, [&] { return sub.getNumPublishers() > 0; }, 10.0))
+        << topic;
     ros::WallDuration(0.2).sleep();  // the publisher's side of the connection
     return sub;
   }
@@ -82,7 +84,8 @@ TEST_F(MapPublisherTest, TheMarkersCarryTheWholeMapToANewSubscriberThenOnlyTheCh
   std::vector<visualization_msgs::MarkerArrayConstPtr> markers;
   ros::Subscriber sub = keep("occupied_cells_vis_array", &markers);
   publisher_->publish();
-  ASSERT_TRUE(waitFor(test_mutex_, [&] { return markers.size() == 1; }, 5.0));
+  ASSERT_TRUE(waitFor(
+      test_mutex_, [&] { return markers.size() == 1; }, 5.0));
   {
     std::lock_guard<std::mutex> lock(test_mutex_);
     const auto& whole = markers[0]->markers;
@@ -95,7 +98,8 @@ TEST_F(MapPublisherTest, TheMarkersCarryTheWholeMapToANewSubscriberThenOnlyTheCh
   publisher_->publish();  // nothing changed: nothing goes out
   fuse({kBlockB + Eigen::Vector3i(1, 0, 0)}, 2.0);
   publisher_->publish();
-  ASSERT_TRUE(waitFor(test_mutex_, [&] { return markers.size() == 2; }, 5.0));
+  ASSERT_TRUE(waitFor(
+      test_mutex_, [&] { return markers.size() == 2; }, 5.0));
   ros::WallDuration(0.3).sleep();
   std::lock_guard<std::mutex> lock(test_mutex_);
   ASSERT_EQ(markers.size(), 2u) << "a publish without a change sent markers";
@@ -115,10 +119,12 @@ TEST_F(MapPublisherTest, TheWholeMapWaitsForFullMapPeriod) {
   ros::Subscriber map_sub = keep("octomap_binary", &maps);
   ros::Subscriber marker_sub = keep("occupied_cells_vis_array", &markers);
   publisher_->publish();
-  ASSERT_TRUE(waitFor(test_mutex_, [&] { return maps.size() == 1 && markers.size() == 1; }, 5.0));
+  ASSERT_TRUE(waitFor(
+      test_mutex_, [&] { return maps.size() == 1 && markers.size() == 1; }, 5.0));
   fuse({kBlockB}, 2.0);
   publisher_->publish();  // the markers carry the change; the whole map waits an hour
-  ASSERT_TRUE(waitFor(test_mutex_, [&] { return markers.size() == 2; }, 5.0));
+  ASSERT_TRUE(waitFor(
+      test_mutex_, [&] { return markers.size() == 2; }, 5.0));
   ros::WallDuration(0.3).sleep();
   EXPECT_EQ(count(maps), 1u);
 }

@@ -50,8 +50,8 @@ bool holdsCell(const std::string& path, const Eigen::Vector3i& cell) {
 class MapSaverTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = ::testing::TempDir() + "map_saver_" + ::testing::UnitTest::GetInstance()->current_test_info()->name() +
-           "_" + std::to_string(::getpid());
+    dir_ = ::testing::TempDir() + "map_saver_" + ::testing::UnitTest::GetInstance()->current_test_info()->name() + "_" +
+           std::to_string(::getpid());
     config_.save_dir = dir_;
     config_.map_name = "flight";
   }
@@ -171,7 +171,8 @@ TEST_F(MapSaverTest, CheckpointsWriteTheChangedMapWithoutADatabase) {
   ros::WallDuration(0.3).sleep();
   EXPECT_FALSE(exists(dir_ + "/flight.bt"));  // nothing fused yet: nothing written
   fuse(&fusion_, kCell, 1.0);
-  ASSERT_TRUE(waitFor(fusion_mutex_, [&] { return exists(dir_ + "/flight.bt"); }, 5.0));
+  ASSERT_TRUE(waitFor(
+      fusion_mutex_, [&] { return exists(dir_ + "/flight.bt"); }, 5.0));
   EXPECT_TRUE(holdsCell(dir_ + "/flight.bt", kCell));
 
   config_.save_dir = dir_ + "/flight.bt/maps";  // under a file: every checkpoint fails
@@ -180,7 +181,8 @@ TEST_F(MapSaverTest, CheckpointsWriteTheChangedMapWithoutADatabase) {
   ros::NodeHandle failing_nh("/failing_checkpoints");
   failing->advertise(failing_nh, failing_nh);
   fuse(&failing_map, kCell, 1.0);
-  ASSERT_TRUE(waitFor(fusion_mutex_, [&] { return failing->savesFailed() > 0; }, 5.0));
+  ASSERT_TRUE(waitFor(
+      fusion_mutex_, [&] { return failing->savesFailed() > 0; }, 5.0));
   std::lock_guard<std::mutex> lock(fusion_mutex_);
   EXPECT_TRUE(failing->lastSaveFailed());
   ASSERT_FALSE(problems_.empty());

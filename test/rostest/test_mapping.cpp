@@ -1,13 +1,13 @@
 // The two nodelets in a real manager, driven as a vehicle drives them:
 // rendered disparity images of a known scene with their poses on /tf.
 
-#include <gtest/gtest.h>
-#include <ros/ros.h>
 #include <diagnostic_msgs/DiagnosticArray.h>
-#include <rosgraph_msgs/Log.h>
 #include <dynamic_reconfigure/Reconfigure.h>
+#include <gtest/gtest.h>
 #include <nodelet/NodeletLoad.h>
 #include <nodelet/NodeletUnload.h>
+#include <ros/ros.h>
+#include <rosgraph_msgs/Log.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 #include <std_srvs/Empty.h>
@@ -19,10 +19,10 @@
 
 #include <array>
 #include <cmath>
-#include <functional>
-#include <map>
-#include <limits>
 #include <cstring>
+#include <functional>
+#include <limits>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -91,7 +91,9 @@ class MappingTest : public ::testing::Test {
     return values;
   }
   std::map<std::string, std::string> mapperDiagnostics() { return diagnostics("disparity_mapper: mapper"); }
-  std::map<std::string, std::string> accumulatorDiagnostics() { return diagnostics("octomap_accumulator: accumulator"); }
+  std::map<std::string, std::string> accumulatorDiagnostics() {
+    return diagnostics("octomap_accumulator: accumulator");
+  }
 
   void onUpdate(const OccupancyUpdateConstPtr& msg) {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -112,8 +114,8 @@ class MappingTest : public ::testing::Test {
 
   /// A well-formed disparity message of @p image (default: the wall) at @p stamp.
   boost::shared_ptr<stereo_msgs::DisparityImage> makeFrame(const ros::Time& stamp,
-                                                            const std::string& frame = "camera_optical",
-                                                            const cv::Mat& image = cv::Mat()) {
+                                                           const std::string& frame = "camera_optical",
+                                                           const cv::Mat& image = cv::Mat()) {
     const cv::Mat& img = image.empty() ? image_ : image;
     auto msg = boost::make_shared<stereo_msgs::DisparityImage>();
     std_msgs::Header header;
@@ -242,8 +244,8 @@ float maxLogOdds(const OccupancyUpdate& msg) {
 // same frame; dynamic_reconfigure changes the model; an invalid parameter
 // keeps a nodelet from starting without harming the manager.
 TEST_F(MappingTest, DepthInputReconfigureAndInvalidParameters) {
-  ros::Subscriber depth_updates = nh_.subscribe<OccupancyUpdate>(
-      "/depth_update", 5, [this](const OccupancyUpdateConstPtr& msg) {
+  ros::Subscriber depth_updates =
+      nh_.subscribe<OccupancyUpdate>("/depth_update", 5, [this](const OccupancyUpdateConstPtr& msg) {
         std::lock_guard<std::mutex> lock(mutex_);
         depth_updates_.push_back(msg);
       });
@@ -259,8 +261,8 @@ TEST_F(MappingTest, DepthInputReconfigureAndInvalidParameters) {
   // the load itself answers success); the manager lives on, and the same
   // nodelet with a valid value starts.
   std::vector<std::string> fatal;
-  ros::Subscriber log_sub = nh_.subscribe<rosgraph_msgs::Log>(
-      "/rosout", 100, [&](const rosgraph_msgs::LogConstPtr& log) {
+  ros::Subscriber log_sub =
+      nh_.subscribe<rosgraph_msgs::Log>("/rosout", 100, [&](const rosgraph_msgs::LogConstPtr& log) {
         std::lock_guard<std::mutex> lock(mutex_);
         if (log->level == rosgraph_msgs::Log::FATAL) fatal.push_back(log->msg);
       });
@@ -272,9 +274,11 @@ TEST_F(MappingTest, DepthInputReconfigureAndInvalidParameters) {
   nodelet::NodeletLoad load;
   load.request.name = "/bad_mapper";
   load.request.type = "stereo_occupancy/DisparityMapper";
-  for (const auto& [from, to] : std::vector<std::pair<std::string, std::string>>{
-           {"disparity", "/bad/disparity"}, {"occupancy_update", "/bad/occupancy_update"},
-           {"local_grid_cloud", "/bad/local_grid_cloud"}, {"disparity_image", "/bad/disparity_image"}}) {
+  for (const auto& [from, to] :
+       std::vector<std::pair<std::string, std::string>>{{"disparity", "/bad/disparity"},
+                                                        {"occupancy_update", "/bad/occupancy_update"},
+                                                        {"local_grid_cloud", "/bad/local_grid_cloud"},
+                                                        {"disparity_image", "/bad/disparity_image"}}) {
     load.request.remap_source_args.push_back("/" + from);
     load.request.remap_target_args.push_back(to);
   }
@@ -364,8 +368,10 @@ TEST_F(MappingTest, DepthInputReconfigureAndInvalidParameters) {
   size_t same = 0, differ = 0;
   for (const auto& [cell, v] : disparity_cells) {
     const auto it = depth_cells.find(cell);
-    if (it != depth_cells.end() && std::abs(it->second - v) <= 1e-3f) ++same;
-    else ++differ;
+    if (it != depth_cells.end() && std::abs(it->second - v) <= 1e-3f)
+      ++same;
+    else
+      ++differ;
   }
   differ += depth_cells.size() - same;  // cells only the depth update has, or with other values
   ASSERT_GT(disparity_cells.size(), 10000u);
@@ -478,7 +484,11 @@ TEST_F(MappingTest, BadInputIsRefusedAndTheNextImageWorks) {
       {"16UC1 encoding", [](stereo_msgs::DisparityImage& m) { m.image.encoding = "16UC1"; }},
       {"step too small", [](stereo_msgs::DisparityImage& m) { m.image.step = 100; }},
       {"data too short", [](stereo_msgs::DisparityImage& m) { m.image.data.resize(1000); }},
-      {"empty image", [](stereo_msgs::DisparityImage& m) { m.image.width = m.image.height = 0; m.image.data.clear(); }},
+      {"empty image",
+       [](stereo_msgs::DisparityImage& m) {
+         m.image.width = m.image.height = 0;
+         m.image.data.clear();
+       }},
       {"zero height", [](stereo_msgs::DisparityImage& m) { m.image.height = 0; }},
       {"f = 0", [](stereo_msgs::DisparityImage& m) { m.f = 0.0f; }},
       {"f < 0", [](stereo_msgs::DisparityImage& m) { m.f = -700.0f; }},
@@ -487,8 +497,12 @@ TEST_F(MappingTest, BadInputIsRefusedAndTheNextImageWorks) {
       {"f NaN", [=](stereo_msgs::DisparityImage& m) { m.f = nan; }},
       {"T inf", [=](stereo_msgs::DisparityImage& m) { m.T = inf; }},
       {"delta_d NaN", [=](stereo_msgs::DisparityImage& m) { m.delta_d = nan; }},
-      {"oversized image", [](stereo_msgs::DisparityImage& m) {
-         m.image.width = 5000; m.image.height = 5000; m.image.step = 20000; }},
+      {"oversized image",
+       [](stereo_msgs::DisparityImage& m) {
+         m.image.width = 5000;
+         m.image.height = 5000;
+         m.image.step = 20000;
+       }},
       // A well-formed camera for which 0.25 m cells are too fine (f = 1 px
       // would need 2^-10 px lines): refused, and reported once for both.
       {"f = 1 px", [](stereo_msgs::DisparityImage& m) { m.f = 1.0f; }},
@@ -497,10 +511,11 @@ TEST_F(MappingTest, BadInputIsRefusedAndTheNextImageWorks) {
   int too_fine_errors = 0;
   // Straight from the nodes' /rosout publishers (the rosout node, which
   // would aggregate them to /rosout_agg, is not part of every installation).
-  ros::Subscriber log_sub = nh_.subscribe<rosgraph_msgs::Log>(
-      "/rosout", 100, [&](const rosgraph_msgs::LogConstPtr& log) {
+  ros::Subscriber log_sub =
+      nh_.subscribe<rosgraph_msgs::Log>("/rosout", 100, [&](const rosgraph_msgs::LogConstPtr& log) {
         std::lock_guard<std::mutex> lock(mutex_);
-        if (log->level == rosgraph_msgs::Log::ERROR && log->msg.find("cannot map with this camera") != std::string::npos)
+        if (log->level == rosgraph_msgs::Log::ERROR &&
+            log->msg.find("cannot map with this camera") != std::string::npos)
           ++too_fine_errors;
       });
   const ros::WallTime log_until = ros::WallTime::now() + ros::WallDuration(10.0);
@@ -527,8 +542,10 @@ TEST_F(MappingTest, BadInputIsRefusedAndTheNextImageWorks) {
   for (int k = 0; k < 2; ++k) {
     const ros::Time stamp = next();
     auto pose = toTransformMsg(T_W_C_, stamp, "map", "bad_pose_" + std::to_string(k));
-    if (k == 0) pose.transform.translation.x = nan;
-    else pose.transform.rotation.w = 3.0;
+    if (k == 0)
+      pose.transform.translation.x = nan;
+    else
+      pose.transform.rotation.w = 3.0;
     tf_.sendTransform(pose);
     disparity_pub_.publish(makeFrame(stamp, "bad_pose_" + std::to_string(k)));
   }

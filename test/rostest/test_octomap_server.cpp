@@ -22,8 +22,8 @@
 #include <cstdio>
 #include <fstream>
 #include <iterator>
-#include <memory>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <set>
 #include <sstream>
@@ -73,8 +73,12 @@ nodelet::NodeletLoad accumulatorLoad(const std::string& name, bool own_input) {
   nodelet::NodeletLoad load;
   load.request.name = name;
   load.request.type = "stereo_occupancy/OctomapAccumulator";
-  std::vector<std::string> topics = {"octomap_binary", "octomap_full", "occupied_cells_vis_array",
-                                     "free_cells_vis_array", "octomap_point_cloud_centers", "projected_map"};
+  std::vector<std::string> topics = {"octomap_binary",
+                                     "octomap_full",
+                                     "occupied_cells_vis_array",
+                                     "free_cells_vis_array",
+                                     "octomap_point_cloud_centers",
+                                     "projected_map"};
   if (own_input) topics.push_back("occupancy_update");
   for (const std::string& topic : topics) {
     load.request.remap_source_args.push_back("/" + topic);
@@ -119,7 +123,9 @@ class OctomapServerTest : public ::testing::Test {
       disparity_pub_.publish(msg);
       ros::WallDuration(0.1).sleep();
     }
-    ASSERT_TRUE(waitFor(mutex_, [&] { return holdsTheWall(latest_map_); }, 20.0)) << "the wall never reached the map";
+    ASSERT_TRUE(waitFor(
+        mutex_, [&] { return holdsTheWall(latest_map_); }, 20.0))
+        << "the wall never reached the map";
   }
 
   /// Saves through @p service (the save directory made first); fails the test if it does not.
@@ -161,14 +167,14 @@ TEST_F(OctomapServerTest, OutputsAndServicesAsOctomapServer) {
       *slot = msg;
     };
   };
-  ros::Subscriber projected_sub =
-      nh_.subscribe<nav_msgs::OccupancyGrid>("/projected_map", 1, keep(&projected));
+  ros::Subscriber projected_sub = nh_.subscribe<nav_msgs::OccupancyGrid>("/projected_map", 1, keep(&projected));
   ros::Subscriber full_sub = nh_.subscribe<Octomap>("/octomap_full", 1, keep(&full));
   ros::Subscriber free_sub =
       nh_.subscribe<visualization_msgs::MarkerArray>("/free_cells_vis_array", 1, keep(&free_markers));
   mapTheWall();
   // projected_map: the wall's columns occupied, the ground before it free.
-  ASSERT_TRUE(waitFor(mutex_, [&] { return projected && cellAt(*projected, 12.1, 0.1) == 100; }, 10.0));
+  ASSERT_TRUE(waitFor(
+      mutex_, [&] { return projected && cellAt(*projected, 12.1, 0.1) == 100; }, 10.0));
   {
     std::lock_guard<std::mutex> lock(mutex_);
     EXPECT_EQ(projected->header.frame_id, "map");
@@ -177,7 +183,8 @@ TEST_F(OctomapServerTest, OutputsAndServicesAsOctomapServer) {
     EXPECT_EQ(cellAt(*projected, 12.1, 2.6), 100);
   }
   // octomap_full: the log-odds, binary false, id OcTree.
-  ASSERT_TRUE(waitFor(mutex_, [&] { return full != nullptr; }, 10.0));
+  ASSERT_TRUE(waitFor(
+      mutex_, [&] { return full != nullptr; }, 10.0));
   {
     std::lock_guard<std::mutex> lock(mutex_);
     EXPECT_FALSE(full->binary);
@@ -188,7 +195,8 @@ TEST_F(OctomapServerTest, OutputsAndServicesAsOctomapServer) {
     EXPECT_GT(wall->getLogOdds(), 0.0f);
   }
   // free_cells_vis_array: free leaves as cubes.
-  ASSERT_TRUE(waitFor(mutex_, [&] { return free_markers != nullptr; }, 10.0));
+  ASSERT_TRUE(waitFor(
+      mutex_, [&] { return free_markers != nullptr; }, 10.0));
   {
     std::lock_guard<std::mutex> lock(mutex_);
     size_t points = 0;
@@ -313,7 +321,8 @@ TEST_F(OctomapServerTest, MarkersCarryOnlyTheChangedBlocks) {
     for (const auto& m : msg->markers) {
       std::set<std::array<int, 3>> blocks_of_points;
       for (const auto& p : m.points) {
-        const std::array<int, 3> g = {static_cast<int>(std::floor(p.x / 0.25)), static_cast<int>(std::floor(p.y / 0.25)),
+        const std::array<int, 3> g = {static_cast<int>(std::floor(p.x / 0.25)),
+                                      static_cast<int>(std::floor(p.y / 0.25)),
                                       static_cast<int>(std::floor(p.z / 0.25))};
         cells.insert(g);
         blocks_of_points.insert({g[0] >> 4, g[1] >> 4, g[2] >> 4});
@@ -326,8 +335,9 @@ TEST_F(OctomapServerTest, MarkersCarryOnlyTheChangedBlocks) {
   const size_t whole_blocks = whole["occupied_cells_vis_array"].size();
   EXPECT_EQ(whole_map_messages, 0u);
   EXPECT_EQ(changed.size(), 2u) << "blocks sent after the update; the map has " << whole_blocks;
-  EXPECT_EQ(std::count_if(changed.begin(), changed.end(), [](const Block& b) { return b.first != "occupied_cells_z0"; }),
-            0) << "blocks outside z block 0";
+  EXPECT_EQ(
+      std::count_if(changed.begin(), changed.end(), [](const Block& b) { return b.first != "occupied_cells_z0"; }), 0)
+      << "blocks outside z block 0";
   EXPECT_EQ(mixed_markers, 0u) << "markers with the cells of more than one block";
   size_t updated = 0;
   for (const auto& g : cells)
@@ -366,7 +376,9 @@ TEST_F(OctomapServerTest, AnAccumulatorStartsFromASavedMap) {
   nodelet::NodeletLoad load = accumulatorLoad("/restored", /*own_input=*/true);
   ASSERT_TRUE(ros::service::call("/stereo_occupancy_manager/load_nodelet", load));
   ASSERT_TRUE(load.response.success);
-  ASSERT_TRUE(waitFor(mutex_, [&] { return restored != nullptr; }, 20.0)) << "the restored map was not published";
+  ASSERT_TRUE(waitFor(
+      mutex_, [&] { return restored != nullptr; }, 20.0))
+      << "the restored map was not published";
   {
     std::lock_guard<std::mutex> lock(mutex_);
     EXPECT_EQ(restored->header.frame_id, "map");
@@ -402,7 +414,8 @@ TEST_F(OctomapServerTest, ARestartedAccumulatorContinuesFromItsDatabase) {
   ASSERT_TRUE(load.response.success);
   ASSERT_TRUE(ros::service::waitForService("/mission/save_map", ros::Duration(10.0)));
   mapTheWall();  // both accumulators take the updates
-  ASSERT_TRUE(waitFor(mutex_, [&] { return holdsTheWall(mission_map); }, 20.0))
+  ASSERT_TRUE(waitFor(
+      mutex_, [&] { return holdsTheWall(mission_map); }, 20.0))
       << "the wall never reached the mission's map";
   ASSERT_TRUE(ros::service::call("/stereo_occupancy_manager/unload_nodelet", unload));  // closes the database
 
@@ -450,11 +463,11 @@ TEST_F(OctomapServerTest, ALateSubscriberGetsTheWholeMapInEitherOrder) {
     nav_msgs::OccupancyGridConstPtr projected;
     ros::Subscriber rviz, planner, planner_grid, late;
     auto subscribeRviz = [&] {
-      rviz = nh_.subscribe<visualization_msgs::MarkerArray>(
-          name + "/occupied_cells_vis_array", 10, [&](const visualization_msgs::MarkerArrayConstPtr& msg) {
-            std::lock_guard<std::mutex> lock(mutex_);
-            markers = msg;
-          });
+      rviz = nh_.subscribe<visualization_msgs::MarkerArray>(name + "/occupied_cells_vis_array", 10,
+                                                            [&](const visualization_msgs::MarkerArrayConstPtr& msg) {
+                                                              std::lock_guard<std::mutex> lock(mutex_);
+                                                              markers = msg;
+                                                            });
     };
     auto subscribePlanner = [&] {
       planner = nh_.subscribe<Octomap>(name + "/octomap_binary", 1, [&](const OctomapConstPtr& msg) {
@@ -464,12 +477,16 @@ TEST_F(OctomapServerTest, ALateSubscriberGetsTheWholeMapInEitherOrder) {
     };
     if (rviz_first) {
       subscribeRviz();
-      ASSERT_TRUE(waitFor(mutex_, [&] { return markers != nullptr; }, 20.0)) << name << ": rviz got no markers";
+      ASSERT_TRUE(waitFor(
+          mutex_, [&] { return markers != nullptr; }, 20.0))
+          << name << ": rviz got no markers";
       ros::WallDuration(1.5).sleep();  // the whole map went out, to rviz alone
       subscribePlanner();
     } else {
       subscribePlanner();
-      ASSERT_TRUE(waitFor(mutex_, [&] { return octomap != nullptr; }, 20.0)) << name << ": the planner got no map";
+      ASSERT_TRUE(waitFor(
+          mutex_, [&] { return octomap != nullptr; }, 20.0))
+          << name << ": the planner got no map";
       ros::WallDuration(1.5).sleep();
       subscribeRviz();
     }
@@ -478,18 +495,23 @@ TEST_F(OctomapServerTest, ALateSubscriberGetsTheWholeMapInEitherOrder) {
                                                             std::lock_guard<std::mutex> lock(mutex_);
                                                             projected = msg;
                                                           });
-    EXPECT_TRUE(waitFor(mutex_, [&] { return holdsTheWall(octomap); }, 5.0)) << name << ": octomap_binary";
-    EXPECT_TRUE(waitFor(mutex_, [&] { return markers != nullptr; }, 5.0)) << name << ": markers";
-    EXPECT_TRUE(waitFor(mutex_,
-                        [&] { return projected && std::count(projected->data.begin(), projected->data.end(), 100) > 20; },
-                        5.0))
+    EXPECT_TRUE(waitFor(
+        mutex_, [&] { return holdsTheWall(octomap); }, 5.0))
+        << name << ": octomap_binary";
+    EXPECT_TRUE(waitFor(
+        mutex_, [&] { return markers != nullptr; }, 5.0))
+        << name << ": markers";
+    EXPECT_TRUE(waitFor(
+        mutex_, [&] { return projected && std::count(projected->data.begin(), projected->data.end(), 100) > 20; }, 5.0))
         << name << ": projected_map without the wall";
     // Latched: the next subscriber gets the last map at once, with no new publication due.
     late = nh_.subscribe<Octomap>(name + "/octomap_binary", 1, [&](const OctomapConstPtr& msg) {
       std::lock_guard<std::mutex> lock(mutex_);
       latched = msg;
     });
-    EXPECT_TRUE(waitFor(mutex_, [&] { return holdsTheWall(latched); }, 2.0)) << name << ": nothing latched";
+    EXPECT_TRUE(waitFor(
+        mutex_, [&] { return holdsTheWall(latched); }, 2.0))
+        << name << ": nothing latched";
     nodelet::NodeletUnload unload;
     unload.request.name = name;
     EXPECT_TRUE(ros::service::call("/stereo_occupancy_manager/unload_nodelet", unload));

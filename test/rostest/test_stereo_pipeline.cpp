@@ -16,8 +16,8 @@
 #include <opencv2/imgproc.hpp>
 
 #include <cstring>
-#include <mutex>
 #include <memory>
+#include <mutex>
 #include <string>
 
 #include "mono_image.h"
@@ -30,11 +30,10 @@ using namespace stereo_occupancy;
 namespace {
 
 const std::string kData = "/usr/share/doc/opencv-doc/examples/data/";  // Debian's opencv-doc
-constexpr int kShrink = 4;                      // 1282 x 1110 -> 320 x 277: disparities within 64 px
-constexpr double kFocalFullPx = 3740.0;         // Middlebury 2006 at full size
+constexpr int kShrink = 4;               // 1282 x 1110 -> 320 x 277: disparities within 64 px
+constexpr double kFocalFullPx = 3740.0;  // Middlebury 2006 at full size
 constexpr double kBaselineM = 0.16;
 constexpr double kFocalPx = kFocalFullPx / kShrink;
-
 
 /// A rectified camera: no distortion, identity rectification; the right one
 /// shifted by the baseline (P[3] = -f b).
@@ -146,8 +145,10 @@ TEST(StereoPipeline, StereoImageProcDisparitiesMapTheScene) {
     if (surface > 0 && surface_found > 0.6 * surface) break;
   }
   ASSERT_GT(surface, 1000u);
-  std::printf("[          ] true surface points found occupied: %zu of %zu; halfway points occupied: %zu of %zu "
-              "observed\n", surface_found, surface, before_occupied, before);
+  std::printf(
+      "[          ] true surface points found occupied: %zu of %zu; halfway points occupied: %zu of %zu "
+      "observed\n",
+      surface_found, surface, before_occupied, before);
   EXPECT_GT(static_cast<double>(surface_found), 0.6 * static_cast<double>(surface));
   EXPECT_GT(static_cast<double>(before), 0.5 * static_cast<double>(surface));  // the space before was observed
   EXPECT_LT(static_cast<double>(before_occupied), 0.05 * static_cast<double>(before));

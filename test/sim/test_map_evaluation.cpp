@@ -102,8 +102,8 @@ namespace {
 FlightScenario postAndWire() {
   FlightScenario s;
   s.scene.ground_height_m = 0.0;
-  s.scene.addBox({10.0, -0.2, 0.0}, {10.4, 0.2, 6.0});      // 0: the post
-  s.scene.addBox({10.15, 0.0, 3.95}, {10.25, 5.0, 4.05});   // 1: the cable, its end inside the post
+  s.scene.addBox({10.0, -0.2, 0.0}, {10.4, 0.2, 6.0});     // 0: the post
+  s.scene.addBox({10.15, 0.0, 3.95}, {10.25, 5.0, 4.05});  // 1: the cable, its end inside the post
   s.T_B_C = lookingAlongX(Eigen::Vector3d::Zero());
   Eigen::Isometry3d T_W_B = Eigen::Isometry3d::Identity();
   T_W_B.translation() = Eigen::Vector3d(0.0, 2.0, 3.0);
@@ -126,14 +126,14 @@ TEST(MapEvaluation, ObstaclesShowInTheirOwnZones) {
     const uint64_t key = packCell(LocalGrid::globalIndex(p, kCell));
     return std::binary_search(zones.zones[k].begin(), zones.zones[k].end(), key);
   };
-  EXPECT_TRUE(inZone(0, {10.1, 0.1, 5.1}));    // the post's face
-  EXPECT_TRUE(inZone(0, {9.9, 0.1, 5.1}));     // one cell in front of it
-  EXPECT_FALSE(inZone(0, {9.6, 0.1, 5.1}));    // two cells in front
-  EXPECT_FALSE(inZone(0, {9.9, 0.1, -0.1}));   // the ground before its foot
-  EXPECT_TRUE(inZone(1, {10.1, 2.6, 3.9}));    // the cable, 2.6 m left
-  EXPECT_FALSE(inZone(1, {10.1, 0.1, 3.6}));   // the post's face below the cable
+  EXPECT_TRUE(inZone(0, {10.1, 0.1, 5.1}));   // the post's face
+  EXPECT_TRUE(inZone(0, {9.9, 0.1, 5.1}));    // one cell in front of it
+  EXPECT_FALSE(inZone(0, {9.6, 0.1, 5.1}));   // two cells in front
+  EXPECT_FALSE(inZone(0, {9.9, 0.1, -0.1}));  // the ground before its foot
+  EXPECT_TRUE(inZone(1, {10.1, 2.6, 3.9}));   // the cable, 2.6 m left
+  EXPECT_FALSE(inZone(1, {10.1, 0.1, 3.6}));  // the post's face below the cable
   EXPECT_FALSE(inZone(0, {10.1, 2.6, 3.9}));
-  for (double z : {3.9, 4.1}) {                // the cells holding the post's face and the cable's end
+  for (double z : {3.9, 4.1}) {  // the cells holding the post's face and the cable's end
     EXPECT_FALSE(inZone(0, {10.1, 0.1, z})) << z;
     EXPECT_FALSE(inZone(1, {10.1, 0.1, z})) << z;
   }

@@ -58,7 +58,8 @@ void expectAxes(const cv::Mat& view, int plot_rows, const char* name) {
   const int bottom = kTop + plot_rows;  // the first row below the plot's box
   for (int metres : {0, 5, 10}) {
     const int x = kLeft + kMargin + 16 * metres;
-    for (int y = bottom; y < bottom + 6; ++y) EXPECT_EQ(view.at<cv::Vec3b>(y, x), kInk) << metres << " m tick, row " << y;
+    for (int y = bottom; y < bottom + 6; ++y)
+      EXPECT_EQ(view.at<cv::Vec3b>(y, x), kInk) << metres << " m tick, row " << y;
     for (int dx : {-3, 3}) EXPECT_EQ(view.at<cv::Vec3b>(bottom + 2, x + dx), kBackground) << metres << " m tick";
     EXPECT_TRUE(hasInk(view, cv::Rect(x - 8, bottom + 8, 20, 11))) << "no label under the " << metres << " m tick";
   }
@@ -73,8 +74,8 @@ void expectAxes(const cv::Mat& view, int plot_rows, const char* name) {
 TEST(MapRendering, ViewsHaveTheCellsAxesAndAColourBar) {
   octomap::OcTree map(0.25);
   for (float x = 0.125f; x < 10.0f; x += 0.25f) map.updateNode(octomap::point3d(x, 0.125f, 0.125f), true);  // a rail
-  map.updateNode(octomap::point3d(5.125f, 0.125f, 4.125f), true);                                           // a post top
-  map.updateNode(octomap::point3d(5.125f, 3.125f, 0.125f), false);                                          // free: not drawn
+  map.updateNode(octomap::point3d(5.125f, 0.125f, 4.125f), true);   // a post top
+  map.updateNode(octomap::point3d(5.125f, 3.125f, 0.125f), false);  // free: not drawn
   cv::Mat top, side;
   const double ppm = 16.0;
   renderMapViews(map, ppm, &top, &side);

@@ -78,7 +78,8 @@ TEST(SceneImages, TiledRaysHitWhatTheWholeSceneHits) {
     for (int y = 0; y < kCamera.height_px; ++y)
       for (int x = 0; x < kCamera.width_px; ++x) {
         int hit = SyntheticScene::kHitNothing;
-        const double range = scene.castRay(pose.translation(), pose.linear() * camera.rayThroughPixel(x, y).normalized(), &hit);
+        const double range =
+            scene.castRay(pose.translation(), pose.linear() * camera.rayThroughPixel(x, y).normalized(), &hit);
         differ += hit != hits.object.at<int>(y, x) || (std::isfinite(range) && range != hits.range_m.at<double>(y, x));
         boxes_seen += hit >= 0;
       }
@@ -102,8 +103,8 @@ TEST(SceneImages, BothCamerasSeeOneTexture) {
   const double at_truth = meanDifference(left, right, kWallDisparityPx);
   std::printf("[          ] mean grey difference at the true shift %.3f", at_truth);
   EXPECT_LT(at_truth, 0.3);
-  for (int wrong : {kWallDisparityPx - 4, kWallDisparityPx - 1, kWallDisparityPx + 1, kWallDisparityPx + 4,
-                    -kWallDisparityPx, 0}) {
+  for (int wrong :
+       {kWallDisparityPx - 4, kWallDisparityPx - 1, kWallDisparityPx + 1, kWallDisparityPx + 4, -kWallDisparityPx, 0}) {
     const double off = meanDifference(left, right, wrong);
     std::printf(", at %d px %.2f", wrong, off);
     EXPECT_GT(off, 1.0) << "shift " << wrong;
@@ -144,7 +145,8 @@ TEST(SceneImages, SgbmFindsTheWallsDisparity) {
   std::nth_element(matched.begin(), matched.begin() + matched.size() / 2, matched.end());
   EXPECT_NEAR(matched[matched.size() / 2], kWallDisparityPx, 1.0 / 16.0);
   // Left of the search range the matcher has nothing to compare: unmatched.
-  EXPECT_EQ(cv::countNonZero(disparity.colRange(0, sgbm.num_disparities) == disparity.colRange(0, sgbm.num_disparities)), 0);
+  EXPECT_EQ(
+      cv::countNonZero(disparity.colRange(0, sgbm.num_disparities) == disparity.colRange(0, sgbm.num_disparities)), 0);
 }
 
 // The ground seen at a slant: its disparity falls row by row toward the

@@ -74,7 +74,8 @@ void expectTheMapsOutputs(const MapSnapshot& snapshot, const octomap::OcTree& tr
   std::vector<std::array<float, 3>> centres, expected;
   snapshot.forEachOccupiedCentre([&](const octomap::point3d& p) { centres.push_back({p.x(), p.y(), p.z()}); });
   for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it)
-    if (tree.isNodeOccupied(*it)) expected.push_back({it.getCoordinate().x(), it.getCoordinate().y(), it.getCoordinate().z()});
+    if (tree.isNodeOccupied(*it))
+      expected.push_back({it.getCoordinate().x(), it.getCoordinate().y(), it.getCoordinate().z()});
   EXPECT_EQ(snapshot.numOccupied(), expected.size());
   EXPECT_TRUE(sorted(centres) == sorted(expected)) << "occupied centres differ";
 

@@ -71,8 +71,8 @@ long long sqlNumber(const std::string& path, const std::string& sql) {
   sqlite3* db = nullptr;
   sqlite3_stmt* stmt = nullptr;
   long long value = -1;
-  if (sqlite3_open(path.c_str(), &db) == SQLITE_OK && sqlite3_prepare_v2(db, sql.c_str(), -1, &stmt, nullptr) == SQLITE_OK &&
-      sqlite3_step(stmt) == SQLITE_ROW)
+  if (sqlite3_open(path.c_str(), &db) == SQLITE_OK &&
+      sqlite3_prepare_v2(db, sql.c_str(), -1, &stmt, nullptr) == SQLITE_OK && sqlite3_step(stmt) == SQLITE_ROW)
     value = sqlite3_column_int64(stmt, 0);
   sqlite3_finalize(stmt);
   sqlite3_close(db);
@@ -182,15 +182,16 @@ TEST(MissionMap, TilesGoToTheStoreAndComeBackUnchanged) {
   ASSERT_TRUE(mission.store()->flush());
   const auto with_leaves = MissionMap::assemble(*mission.store(), Eigen::AlignedBox3d());
   for (const char* ext : {".bt", ".ot"}) {
-    const std::string streamed = ::testing::TempDir() + "/streamed" + ext, assembled = ::testing::TempDir() + "/assembled" + ext;
+    const std::string streamed = ::testing::TempDir() + "/streamed" + ext,
+                      assembled = ::testing::TempDir() + "/assembled" + ext;
     MissionMap::writeStore(*mission.store(), streamed, windowed.occupancy_threshold_prob);
     writeOcTree(*with_leaves, assembled);
     EXPECT_TRUE(fileBytes(streamed) == fileBytes(assembled)) << ext << ": the streamed file differs";
     EXPECT_GT(fileBytes(streamed).size(), 1000u);
   }
   // A region of it: only the start.
-  const auto start = MissionMap::assemble(*mission.store(), Eigen::AlignedBox3d(Eigen::Vector3d(-1, -1, -1),
-                                                                                 Eigen::Vector3d(11, 3, 2)));
+  const auto start = MissionMap::assemble(*mission.store(),
+                                          Eigen::AlignedBox3d(Eigen::Vector3d(-1, -1, -1), Eigen::Vector3d(11, 3, 2)));
   EXPECT_EQ(start->getNumLeafNodes(), 2 * MapAccumulator::kPruneOrigins);  // the first flight's cells, all distinct
 }
 
@@ -220,8 +221,8 @@ TEST(MissionMap, ClearBoxReachesTheTilesOnDisk) {
   EXPECT_EQ(mission.clearBox(Eigen::Vector3d(1000.0, 0.0, 0.0), Eigen::Vector3d(1004.99, 2.0, 1.0)), half);
   mission.checkpoint();
   ASSERT_TRUE(mission.store()->flush());
-  const auto start = MissionMap::assemble(*mission.store(), Eigen::AlignedBox3d(Eigen::Vector3d(-1, -1, -1),
-                                                                                 Eigen::Vector3d(11, 3, 2)));
+  const auto start = MissionMap::assemble(*mission.store(),
+                                          Eigen::AlignedBox3d(Eigen::Vector3d(-1, -1, -1), Eigen::Vector3d(11, 3, 2)));
   EXPECT_EQ(start->getNumLeafNodes(), 2 * half);
   EXPECT_EQ(occupiedLeaves(*start), half) << "only x in [5, 10) m is left occupied";
   EXPECT_EQ(occupiedLeaves(mission.live().tree()), half) << "the live stretch: the same";
@@ -250,7 +251,8 @@ TEST(MissionMap, ClearBoxBeforeTheFirstUpdateLeavesNothingInRam) {
   EXPECT_EQ(continued.clearBox(Eigen::Vector3d(-100.0, -100.0, 0.0), Eigen::Vector3d(100.0, 100.0, 0.2)), 0u);
   EXPECT_EQ(continued.live().tree().getNumLeafNodes(), 0u) << "tiles stayed in RAM after a clear that found nothing";
   EXPECT_TRUE(continued.live().tiles().empty());
-  const size_t occupied = continued.clearBox(Eigen::Vector3d(-100.0, -100.0, -100.0), Eigen::Vector3d(100.0, 100.0, 100.0));
+  const size_t occupied =
+      continued.clearBox(Eigen::Vector3d(-100.0, -100.0, -100.0), Eigen::Vector3d(100.0, 100.0, 100.0));
   EXPECT_EQ(occupied, MapAccumulator::kPruneOrigins);  // the odd i's: 100 distinct occupied cells
   EXPECT_EQ(continued.live().tree().getNumLeafNodes(), 0u);
   ASSERT_TRUE(continued.store()->flush());
@@ -279,8 +281,9 @@ TEST(MissionMap, MaintainMergesEqualLeaves) {
     EXPECT_EQ(mission.live().tree().getNumLeafNodes(), 1u);
     const float clamped = mission.live().tree().getClampingThresMinLog();
     for (int i = 0; i < 512; ++i) {
-      const Eigen::Vector3d p = (cube.origin_index + Eigen::Vector3i(i % 8, (i / 8) % 8, i / 64)).cast<double>() * kRes +
-                                Eigen::Vector3d::Constant(kRes / 2);
+      const Eigen::Vector3d p =
+          (cube.origin_index + Eigen::Vector3i(i % 8, (i / 8) % 8, i / 64)).cast<double>() * kRes +
+          Eigen::Vector3d::Constant(kRes / 2);
       const octomap::OcTreeNode* n = mission.live().tree().search(p.x(), p.y(), p.z());
       ASSERT_NE(n, nullptr);
       EXPECT_EQ(n->getLogOdds(), clamped);
@@ -309,8 +312,10 @@ TEST(MissionMap, MaintainMergesEqualLeaves) {
       std::unique_ptr<octomap::AbstractOcTree> read(octomap::AbstractOcTree::read(path));
       octomap::OcTree binary(kRes);
       const bool bt = path.size() > 3 && path.compare(path.size() - 3, 3, ".bt") == 0;
-      if (bt) ASSERT_TRUE(binary.readBinary(path)) << path;
-      else ASSERT_NE(read, nullptr) << path;
+      if (bt)
+        ASSERT_TRUE(binary.readBinary(path)) << path;
+      else
+        ASSERT_NE(read, nullptr) << path;
       const octomap::OcTree& tree = bt ? binary : *dynamic_cast<octomap::OcTree*>(read.get());
       const octomap::OcTreeNode* n = tree.search(2.1, 2.1, 0.1);
       ASSERT_NE(n, nullptr) << path;
@@ -421,8 +426,8 @@ TEST(MissionMap, KillNineLosesOnlyWhatCameAfterTheLastCheckpoint) {
       const octomap::OcTreeKey key(static_cast<octomap::key_type>(i + 32768),
                                    static_cast<octomap::key_type>((i * 7) % 50 + 32768), 32768);
       const octomap::OcTreeNode* n = whole->search(key);
-      ASSERT_TRUE(n && n->getLogOdds() > 0.0f) << "trial " << trial << ": update " << i << " of " << last
-                                               << " (checkpointed) is missing";
+      ASSERT_TRUE(n && n->getLogOdds() > 0.0f)
+          << "trial " << trial << ": update " << i << " of " << last << " (checkpointed) is missing";
     }
     EXPECT_GE(occupiedLeaves(*whole), static_cast<size_t>(last + 1));
     reopened.put(MapAccumulator::TileIndex(100, 100, 0), {MapAccumulator::Leaf{}});
@@ -457,9 +462,12 @@ TEST(TileStore, AFullDiskIsAnErrorAndLosesNothing) {
       setrlimit(RLIMIT_FSIZE, &limit);
       store.put(MapAccumulator::TileIndex(0, 0, 0), leaves);
       std::vector<MapAccumulator::Leaf> back;
-      if (store.flush()) code = 10;                                  // the write must fail
-      else if (store.status().last_error.empty()) code = 11;         // with a reason
-      else if (!store.get(MapAccumulator::TileIndex(0, 0, 0), &back) || back.size() != leaves.size()) code = 12;
+      if (store.flush())
+        code = 10;  // the write must fail
+      else if (store.status().last_error.empty())
+        code = 11;  // with a reason
+      else if (!store.get(MapAccumulator::TileIndex(0, 0, 0), &back) || back.size() != leaves.size())
+        code = 12;
       limit.rlim_cur = unlimited;
       setrlimit(RLIMIT_FSIZE, &limit);
       if (code == 0 && !store.flush()) code = 13;  // room again: written
@@ -490,11 +498,13 @@ TEST(TileStore, DamagedRowsAreSetAsideAndTheRestIsKept) {
     for (int x = 0; x < 4; ++x) store.put(MapAccumulator::TileIndex(x, 0, 0), {tileLeaf({x, 0, 0}, 2.0f)});
     ASSERT_TRUE(store.flush());
   }
-  ASSERT_TRUE(runSql(path, "UPDATE tiles SET octree = zeroblob(2097152) WHERE x = 1; "
-                           "UPDATE tiles SET octree = zeroblob(51200) WHERE x = 3; "
-                           "UPDATE tiles SET octree = substr(octree, 1, length(octree) - 5) WHERE x = 2"));
+  ASSERT_TRUE(runSql(path,
+                     "UPDATE tiles SET octree = zeroblob(2097152) WHERE x = 1; "
+                     "UPDATE tiles SET octree = zeroblob(51200) WHERE x = 3; "
+                     "UPDATE tiles SET octree = substr(octree, 1, length(octree) - 5) WHERE x = 2"));
   // zeroblob() gives zeros; 0xff is what the damage was.
-  ASSERT_TRUE(runSql(path, "UPDATE tiles SET octree = CAST(replace(hex(octree), '00', 'FF') AS BLOB) WHERE x IN (1, 3)"));
+  ASSERT_TRUE(
+      runSql(path, "UPDATE tiles SET octree = CAST(replace(hex(octree), '00', 'FF') AS BLOB) WHERE x IN (1, 3)"));
   ASSERT_TRUE(runSql(path, "UPDATE tiles SET octree = unhex(octree) WHERE x IN (1, 3)") ||
               runSql(path, "SELECT 1"));  // unhex() is SQLite 3.41+; the hex text is damage too
   EXPECT_NE(storeRefusal(path, 0.0, TileStore::Access::kReadOnly).find("3 damaged tile rows"), std::string::npos)
@@ -543,8 +553,10 @@ TEST(TileStore, ForeignFilesAndBadMetaAreRefusedUnchanged) {
   EXPECT_TRUE(runSql(bad_meta, "BEGIN EXCLUSIVE; COMMIT")) << "the refused database stayed locked";
   for (const std::string resolution : {"'abc'", "'0'", "'-1'", "'inf'", "NULL"}) {
     const std::string path = freshDatabase("bad_resolution");
-    ASSERT_TRUE(runSql(path, tables + "INSERT INTO meta VALUES ('format', 'stereo_occupancy tiles 1'), "
-                                      "('resolution_m', " + resolution + ")"));
+    ASSERT_TRUE(runSql(path, tables +
+                                 "INSERT INTO meta VALUES ('format', 'stereo_occupancy tiles 1'), "
+                                 "('resolution_m', " +
+                                 resolution + ")"));
     const std::string why = storeRefusal(path, 0.0, TileStore::Access::kReadOnly);
     EXPECT_TRUE(why.find("not a positive number") != std::string::npos || why.find("NULL") != std::string::npos)
         << resolution << ": " << why;

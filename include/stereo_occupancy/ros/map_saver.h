@@ -33,10 +33,12 @@ struct MapSaverConfig {
   /// The parameters (stereo_occupancy/parameter_table.h): f(spec, member) for each.
   template <typename Self, typename F>
   static void forEachParameter(Self& c, F&& f) {
-    f(textParameter("save_dir", "~save_map, the shutdown save and the mission's database <map_name>.db; empty: nowhere"),
+    f(textParameter("save_dir",
+                    "~save_map, the shutdown save and the mission's database <map_name>.db; empty: nowhere"),
       c.save_dir);
     f(textParameter("map_name", "file base name in save_dir: a plain name"), c.map_name);
-    f(numberParameter("save_period_s", "s", 0.0, 86400.0, "checkpoint the changed tiles to the database this often; 0: never"),
+    f(numberParameter("save_period_s", "s", 0.0, 86400.0,
+                      "checkpoint the changed tiles to the database this often; 0: never"),
       c.save_period_s);
   }
 

@@ -105,7 +105,7 @@ class FrameMapping {
   std::string refused_setup_;
   StereoCameraConfig refused_camera_;
   LocalGrid grid_;
-  cv::Mat depth_disparity_;  ///< the depth path's disparity image, reused
+  cv::Mat depth_disparity_;                ///< the depth path's disparity image, reused
   size_t last_cells_ = 0, last_runs_ = 0;  ///< the last update's sizes: the next one's arrays reserve as much
   FrameCounters counters_;
 };
@@ -149,9 +149,12 @@ class MapFusion {
   /// @throws std::runtime_error; the map is then unchanged.
   void load(const std::string& path) { mission_.load(path); }
   /// MapAccumulator::takeChangedBlocks() and markAllChanged(): what the outputs must send again.
-  std::vector<MapAccumulator::BlockIndex> takeChangedBlocks(bool* all) { return mission_.live().takeChangedBlocks(all); }
+  std::vector<MapAccumulator::BlockIndex> takeChangedBlocks(bool* all) {
+    return mission_.live().takeChangedBlocks(all);
+  }
   void markAllChanged() { mission_.live().markAllChanged(); }
-  /// Leaves no occupied cell in the box, in the store's tiles too (MissionMap::clearBox); returns how many were cleared.
+  /// Leaves no occupied cell in the box, in the store's tiles too (MissionMap::clearBox); returns how many were
+  /// cleared.
   size_t clearBox(const Eigen::Vector3d& W_min, const Eigen::Vector3d& W_max) {
     return mission_.clearBox(W_min, W_max);
   }

@@ -24,10 +24,10 @@ struct DisparityMapperParameters {
   std::string world_frame = "map";  ///< REP-105 world-fixed frame the grid is aligned with
   /// An image whose pose is known only later than this after its stamp is dropped; 0: never [s].
   double tf_timeout_s = 1.0;
-  int queue_size = 5;               ///< images waiting for their transform; the oldest is dropped
-  bool use_depth = false;           ///< subscribe depth + camera_info instead of disparity
-  double depth_baseline_m = 0.05;   ///< baseline b of a depth camera (eq. 4 with d = bf/z) [m]
-  double cx_px = -1.0;              ///< principal point when no camera_info came; < 0: image centre [px]
+  int queue_size = 5;              ///< images waiting for their transform; the oldest is dropped
+  bool use_depth = false;          ///< subscribe depth + camera_info instead of disparity
+  double depth_baseline_m = 0.05;  ///< baseline b of a depth camera (eq. 4 with d = bf/z) [m]
+  double cx_px = -1.0;             ///< principal point when no camera_info came; < 0: image centre [px]
   double cy_px = -1.0;
   int max_image_pixels = 4096 * 4096;  ///< larger images are refused
   /// Range limits and Δd; size, f, b, cx, cy come with each image.
@@ -70,8 +70,8 @@ struct OctomapAccumulatorParameters {
   MapPublisherConfig publisher;  ///< the map's outputs
   MapSaverConfig saving;         ///< the map's files and database
   double prune_period_s = 5.0;   ///< how often cells beyond max_extent_m go to the database (or are dropped) [s]
-  std::string map_file;  ///< a .bt or .ot to start from (octomap_server's map_file); empty: an empty map
-  int update_queue_size = 100;  ///< updates waiting for the fusion; more are lost (and counted)
+  std::string map_file;          ///< a .bt or .ot to start from (octomap_server's map_file); empty: an empty map
+  int update_queue_size = 100;   ///< updates waiting for the fusion; more are lost (and counted)
 
   /// The parameters (stereo_occupancy/parameter_table.h): f(spec, member) for each, the components' included.
   template <typename Self, typename F>

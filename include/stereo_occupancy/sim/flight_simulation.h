@@ -20,9 +20,9 @@ namespace stereo_occupancy {
 
 /// What a real block matcher does to an ideal disparity image.
 struct StereoEffects {
-  double noise_sigma_px = 0.15;       ///< Gaussian disparity noise [px]
+  double noise_sigma_px = 0.15;          ///< Gaussian disparity noise [px]
   double subpixel_step_px = 1.0 / 16.0;  ///< output quantisation (SGBM's 1/16 px) [px]
-  double unmatched_fraction = 0.03;   ///< pixels left unmatched at random (NaN)
+  double unmatched_fraction = 0.03;      ///< pixels left unmatched at random (NaN)
   /// The matcher's search range [px]: a disparity below min_search comes out
   /// as zero (infinitely far), above max_search as unmatched.
   double min_search_disparity_px = 1.0;
@@ -46,9 +46,9 @@ const char* toString(StereoMatcher matcher);
 struct FlightScenario {
   std::string name;
   SyntheticScene scene;
-  StereoCameraConfig camera;       ///< 640x480, f = 700 px, b = 0.3 m
+  StereoCameraConfig camera;  ///< 640x480, f = 700 px, b = 0.3 m
   StereoEffects effects;
-  Eigen::Isometry3d T_B_C;         ///< camera optical frame in the body frame (REP-103 body: x forward, z up)
+  Eigen::Isometry3d T_B_C;               ///< camera optical frame in the body frame (REP-103 body: x forward, z up)
   std::vector<Eigen::Isometry3d> T_W_B;  ///< body poses, one per frame
   double frame_rate_hz = 10.0;
   StereoMatcher matcher = StereoMatcher::kGaussian;

@@ -19,8 +19,8 @@ namespace stereo_occupancy {
 /// The cells a flight really observed, from its exact images.
 struct ObservedGroundTruth {
   double resolution_m = 0.0;
-  std::unordered_set<uint64_t> surface;  ///< cells holding a surface point seen within range
-  std::unordered_set<uint64_t> empty;    ///< cells truly empty on the rays, at least 1.5 cells before the surface
+  std::unordered_set<uint64_t> surface;     ///< cells holding a surface point seen within range
+  std::unordered_set<uint64_t> empty;       ///< cells truly empty on the rays, at least 1.5 cells before the surface
   std::vector<Eigen::Vector3d> viewpoints;  ///< camera centres of the observed frames [m]
 };
 
@@ -59,16 +59,16 @@ ObservedGroundTruth observeGroundTruth(const FlightScenario& scenario, double re
 
 /// Map quality against the truth.
 struct MapQuality {
-  size_t occupied_cells = 0;             ///< occupied leaves of the map
-  size_t occupied_at_surface = 0;        ///< ... within one cell of a solid (inside one counts)
+  size_t occupied_cells = 0;       ///< occupied leaves of the map
+  size_t occupied_at_surface = 0;  ///< ... within one cell of a solid (inside one counts)
   /// ... farther than one cell from a true surface with the centre in free
   /// air, outside every solid: phantom obstacles, which close a planner's corridors.
   size_t occupied_phantom = 0;
   size_t truth_surface_cells = 0;
-  size_t surface_found = 0;              ///< truth surface cells with an occupied cell within one cell
-  size_t surface_called_free = 0;        ///< truth surface cells the map calls free
+  size_t surface_found = 0;        ///< truth surface cells with an occupied cell within one cell
+  size_t surface_called_free = 0;  ///< truth surface cells the map calls free
   size_t truth_empty_cells = 0;
-  size_t empty_known_free = 0;           ///< truly empty observed cells the map calls free
+  size_t empty_known_free = 0;  ///< truly empty observed cells the map calls free
   double occupiedPrecision() const { return occupied_cells ? double(occupied_at_surface) / occupied_cells : 0.0; }
   double occupiedRecall() const { return truth_surface_cells ? double(surface_found) / truth_surface_cells : 0.0; }
   double surfaceCalledFree() const {
@@ -120,7 +120,7 @@ ObstacleZones observeObstacles(const FlightScenario& scenario, double resolution
 
 /// When an obstacle first showed in a map fused frame by frame.
 struct Detection {
-  long frame = -1;          ///< the frame after whose fusion it first showed; -1: never
+  long frame = -1;  ///< the frame after whose fusion it first showed; -1: never
   double distance_m = std::numeric_limits<double>::quiet_NaN();  ///< camera centre to the box then [m]
   bool detected() const { return frame >= 0; }
 };
@@ -147,8 +147,8 @@ class DetectionTracker {
 
 /// A method's detections summed up, against a reference's (OctoMap's).
 struct DetectionSummary {
-  size_t observed = 0;   ///< obstacles with a zone
-  size_t detected = 0;   ///< ... that showed in the map
+  size_t observed = 0;                                                  ///< obstacles with a zone
+  size_t detected = 0;                                                  ///< ... that showed in the map
   double median_distance_m = std::numeric_limits<double>::quiet_NaN();  ///< over the detected ones
   double min_distance_m = std::numeric_limits<double>::quiet_NaN();
   /// Obstacles the reference detected and this method more than

@@ -36,12 +36,12 @@ struct ImageAppearance {
   double ground_contrast = 0.35;         ///< its texture's standard deviation at full detail, relative to its mean
   double min_object_albedo_grey = 70.0;  ///< each box's mean lies in [min, min + span), hashed from its index
   double object_albedo_span_grey = 100.0;
-  double min_object_contrast = 0.15;     ///< each box's texture contrast (as the ground's) lies in [min, min + span)
+  double min_object_contrast = 0.15;  ///< each box's texture contrast (as the ground's) lies in [min, min + span)
   double object_contrast_span = 0.3;
   double textureless_albedo_grey = 225.0;  ///< boxes marked texture-less: uniform white walls
-  double sensor_noise_grey = 1.0;        ///< Gaussian noise of each pixel, independent between the cameras
+  double sensor_noise_grey = 1.0;          ///< Gaussian noise of each pixel, independent between the cameras
   Eigen::Vector3d W_sun = Eigen::Vector3d(0.4, 0.3, 0.85);  ///< direction toward the sun (normalised when used)
-  double ambient = 0.55;                 ///< share of the light that reaches every face
+  double ambient = 0.55;                                    ///< share of the light that reaches every face
 };
 
 /// The texture's finest and coarsest wavelengths [m]: bark and gravel to

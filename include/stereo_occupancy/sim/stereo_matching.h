@@ -15,17 +15,17 @@ namespace stereo_occupancy {
 /// is StereoBM, and these are the values it hands to StereoSGBM when SGBM is
 /// chosen (its fullDP false: MODE_SGBM).
 struct SgbmParameters {
-  int min_disparity_px = 0;          ///< min_disparity
-  int num_disparities = 64;          ///< disparity_range: a multiple of 16
-  int block_size_px = 15;            ///< correlation_window_size (odd)
-  int p1 = 200;                      ///< P1: penalty of a 1 px disparity change between neighbours
-  int p2 = 400;                      ///< P2: penalty of a larger change
-  int disp12_max_diff_px = 0;        ///< disp12MaxDiff: left-right check tolerance
-  int prefilter_cap = 31;            ///< prefilter_cap
+  int min_disparity_px = 0;           ///< min_disparity
+  int num_disparities = 64;           ///< disparity_range: a multiple of 16
+  int block_size_px = 15;             ///< correlation_window_size (odd)
+  int p1 = 200;                       ///< P1: penalty of a 1 px disparity change between neighbours
+  int p2 = 400;                       ///< P2: penalty of a larger change
+  int disp12_max_diff_px = 0;         ///< disp12MaxDiff: left-right check tolerance
+  int prefilter_cap = 31;             ///< prefilter_cap
   int uniqueness_ratio_percent = 15;  ///< uniqueness_ratio
-  int speckle_size_px = 100;         ///< speckle_size: smaller regions are removed
-  int speckle_range_px = 4;          ///< speckle_range: disparity spread within a region
-  bool full_dp = false;              ///< fullDP (MODE_HH)
+  int speckle_size_px = 100;          ///< speckle_size: smaller regions are removed
+  int speckle_range_px = 4;           ///< speckle_range: disparity spread within a region
+  bool full_dp = false;               ///< fullDP (MODE_HH)
 
   /// A 5 px block with OpenCV's recommended penalties (P1 = 8 and P2 = 32
   /// times the block's area) and a 1 px left-right check, the rest as above:

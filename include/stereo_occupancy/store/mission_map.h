@@ -108,8 +108,8 @@ class MissionMap {
 
   MapAccumulator live_;
   std::shared_ptr<TileStore> store_;
-  std::unordered_set<uint64_t> resident_;  ///< tiles the live map holds (not the store's copy)
-  std::unordered_set<uint64_t> unsaved_;   ///< resident tiles changed since their last checkpoint
+  std::unordered_set<uint64_t> resident_;     ///< tiles the live map holds (not the store's copy)
+  std::unordered_set<uint64_t> unsaved_;      ///< resident tiles changed since their last checkpoint
   std::unordered_set<uint64_t> unpublished_;  ///< tiles changed or gone since takeChangedTiles()
   std::unordered_set<uint64_t> unmerged_;     ///< live tiles changed since maintain() merged their leaves
   bool all_unpublished_ = true;               ///< the next takeChangedTiles() gives the whole map

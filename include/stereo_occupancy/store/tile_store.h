@@ -36,7 +36,7 @@ struct TileStoreStatus {
 /// A stored tile's row as the streaming writer needs it (TileStore::rows).
 struct TileRow {
   MapAccumulator::TileIndex tile;
-  size_t nodes = 0;          ///< nodes of the tile's subtree (the tile's node and all below)
+  size_t nodes = 0;           ///< nodes of the tile's subtree (the tile's node and all below)
   float max_log_odds = 0.0f;  ///< the tile node's value: its leaves' largest log-odds
 };
 
@@ -149,7 +149,7 @@ class TileStore {
 
   mutable std::mutex mutex_;  ///< guards everything below
   std::condition_variable wake_writer_, written_;
-  std::map<uint64_t, Queued> queue_;    ///< by packed tile index
+  std::map<uint64_t, Queued> queue_;     ///< by packed tile index
   std::unordered_set<uint64_t> stored_;  ///< tiles with a row
   uint64_t next_version_ = 1;
   std::atomic<uint64_t> generation_{0};  ///< clear() counts it up, under both locks
