@@ -7,6 +7,7 @@ PACKAGES=(
   build-essential cmake catkin python3-catkin-pkg python3-empy
   libeigen3-dev libopencv-dev liboctomap-dev libsqlite3-dev pkg-config libgtest-dev clang libclang-rt-14-dev
   sqlite3  # the CLI tests damage a database row as another program would
+  clang-format  # scripts/check_format.sh
   ros-base-dev libroscpp-dev ros-message-generation libnodeletlib-dev pluginlib-dev
   libtf2-ros-dev libtf2-msgs-dev libtf2-eigen-dev libimage-transport-dev libcv-bridge-dev
   libstereo-msgs-dev ros-stereo-msgs libsensor-msgs-dev libgeometry-msgs-dev
