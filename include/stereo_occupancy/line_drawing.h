@@ -105,12 +105,13 @@ class LineDrawer {
   /// hole wider than one measurement's gap (oblique ground: a span) is not
   /// descended: one line along its centre ray draws the free space up to its
   /// nearest measurement's gap; the free space beyond it, within one cell of
-  /// the surface, is left out (docs/performance.md, sixth step). The lines
-  /// draw no hits: every pixel that measures a range gives its own, in the
-  /// cell drawImage() gives it (drawPixelHits()), so the occupied cells are
-  /// per-pixel line drawing's exactly. (One hit per block, at its farthest
-  /// disparity, lost the nearer surface where a real matcher's disparities
-  /// in a block spread over more than a cell of depth.)
+  /// the surface, is left out (docs/performance.md has what the spans cost
+  /// and save). The lines draw no hits: every pixel that measures a range
+  /// gives its own, in the cell drawImage() gives it (drawPixelHits()), so
+  /// the occupied cells are per-pixel line drawing's exactly. (One hit per
+  /// block, at its farthest disparity, lost the nearer surface where a real
+  /// matcher's disparities in a block spread over more than a cell of
+  /// depth.)
   void drawPyramidBounded(const DisparityPyramid& min_pyramid, const DisparityPyramid& max_pyramid,
                           const DisparityBlockBound& bound, const Eigen::Isometry3d& T_W_C, LocalGrid* grid,
                           DrawStatistics* stats);
