@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <string>
 #include <utility>
@@ -39,6 +40,11 @@ class ConstArray {
 };
 
 struct GridUpdate;
+
+/// f(first_global_index, values) of GridUpdateView::forEachSiblingBlock():
+/// called once per block, with the octree's work inside it, so the call
+/// through a std::function costs nothing that shows.
+using SiblingBlockVisitor = std::function<void(const Eigen::Vector3i&, const float (&)[8])>;
 
 /// The known cells of a drawn local grid, run-length encoded over the grid's
 /// linear index i = x + nx·(y + ny·z): run k covers i = run_start[k] ..
@@ -82,8 +88,7 @@ struct GridUpdateView {
   /// indices that holds a cell, where values[i] is the value of the cell at
   /// first_global_index + (i & 1, (i >> 1) & 1, i >> 2) (octree child order),
   /// NaN where the update has no cell. Requires isConsistent().
-  template <typename F>
-  void forEachSiblingBlock(F&& f) const;
+  void forEachSiblingBlock(const SiblingBlockVisitor& f) const;
 };
 
 /// A GridUpdate that owns its arrays: what encodeGridUpdate() writes. Its
@@ -107,10 +112,7 @@ struct GridUpdate {
   void forEachCellBySiblings(F&& f) const {
     GridUpdateView(*this).forEachCellBySiblings(std::forward<F>(f));
   }
-  template <typename F>
-  void forEachSiblingBlock(F&& f) const {
-    GridUpdateView(*this).forEachSiblingBlock(std::forward<F>(f));
-  }
+  void forEachSiblingBlock(const SiblingBlockVisitor& f) const { GridUpdateView(*this).forEachSiblingBlock(f); }
 };
 
 inline GridUpdateView::GridUpdateView(const GridUpdate& update)
@@ -149,116 +151,6 @@ void GridUpdateView::forEachCellBySiblings(F&& f) const {
     for (int i = 0; i < 8; ++i)
       if (values[i] == values[i]) f(first + Eigen::Vector3i(i & 1, (i >> 1) & 1, i >> 2), values[i]);
   });
-}
-
-template <typename F>
-void GridUpdateView::forEachSiblingBlock(F&& f) const {
-  if (log_odds.empty()) return;
-  // Memory and work follow the runs, never the box the update claims: a
-  // message may claim 65535 x 65535 cells and carry one.
-  const int64_t nx = size.x(), ny = size.y();
-  // Each row's stretch of known cells, [x0, x1) with values from log_odds[v]
-  // on; a run may go on into the next row. Sorted by row, then x.
-  struct Segment {
-    int64_t y, z, x0, x1;
-    size_t v;
-  };
-  std::vector<Segment> segments;
-  segments.reserve(run_start.size());
-  size_t v = 0;
-  for (size_t k = 0; k < run_start.size(); ++k) {
-    uint64_t i = run_start[k], left = run_length[k];
-    while (left > 0) {
-      const int64_t row = static_cast<int64_t>(i / static_cast<uint64_t>(nx));
-      const int64_t x0 = static_cast<int64_t>(i % static_cast<uint64_t>(nx));
-      const int64_t len = std::min<int64_t>(static_cast<int64_t>(left), nx - x0);
-      segments.push_back({row % ny, row / ny, x0, x0 + len, v});
-      v += static_cast<size_t>(len);
-      i += static_cast<uint64_t>(len);
-      left -= static_cast<uint64_t>(len);
-    }
-  }
-  // Local index of the 2x2x2 block (even global index) a local index is in, and the end of its block.
-  const int64_t ox = origin_index.x(), oy = origin_index.y(), oz = origin_index.z();
-  auto blockStart = [](int64_t local, int64_t origin) { return local - ((origin + local) & 1); };
-  auto blockEnd = [](int64_t local_end, int64_t origin) { return local_end + ((origin + local_end) & 1); };
-  std::vector<float> rows[4];  // q = dy + 2 dz: one cluster's four rows, NaN where no cell
-  // A strip: the four rows (y0 + dy, z0 + dz) of one line of blocks; its
-  // segments per row are the ranges [begin[q], end[q]) of `segments`.
-  auto visitStrip = [&](int64_t y0, int64_t z0, const size_t(&begin)[4], const size_t(&end)[4]) {
-    size_t next[4] = {begin[0], begin[1], begin[2], begin[3]};
-    for (;;) {
-      // A cluster: the segments whose blocks overlap, in x order; rows[q] spans it.
-      int64_t xs = std::numeric_limits<int64_t>::max();
-      for (int q = 0; q < 4; ++q)
-        if (next[q] < end[q]) xs = std::min(xs, blockStart(segments[next[q]].x0, ox));
-      if (xs == std::numeric_limits<int64_t>::max()) return;
-      size_t first[4], last[4];
-      for (int q = 0; q < 4; ++q) first[q] = last[q] = next[q];
-      int64_t xe = xs;  // the cluster's blocks: [xs, xe), each segment adding at most its length + 2
-      for (bool grew = true; grew;) {
-        grew = false;
-        for (int q = 0; q < 4; ++q)
-          for (; last[q] < end[q] && blockStart(segments[last[q]].x0, ox) <= xe; ++last[q], grew = true)
-            xe = std::max(xe, blockEnd(segments[last[q]].x1, ox));
-      }
-      const size_t width = static_cast<size_t>(xe - xs);
-      for (int q = 0; q < 4; ++q) {
-        if (first[q] == last[q]) continue;
-        rows[q].assign(width, std::numeric_limits<float>::quiet_NaN());
-        for (size_t k = first[q]; k < last[q]; ++k)
-          std::copy(log_odds.begin() + segments[k].v,
-                    log_odds.begin() + segments[k].v + (segments[k].x1 - segments[k].x0),
-                    rows[q].begin() + (segments[k].x0 - xs));
-        next[q] = last[q];
-      }
-      for (int64_t x0 = xs; x0 < xe; x0 += 2) {
-        float values[8];
-        bool any = false;
-        for (int q = 0; q < 4; ++q) {
-          if (first[q] == last[q]) {
-            values[2 * q] = values[2 * q + 1] = std::numeric_limits<float>::quiet_NaN();
-            continue;
-          }
-          values[2 * q] = rows[q][x0 - xs];
-          values[2 * q + 1] = rows[q][x0 + 1 - xs];
-          any |= (values[2 * q] == values[2 * q]) | (values[2 * q + 1] == values[2 * q + 1]);
-        }
-        if (any)
-          f(Eigen::Vector3i(static_cast<int>(ox + x0), static_cast<int>(oy + y0), static_cast<int>(oz + z0)), values);
-      }
-    }
-  };
-  // The strips in z, then y order: a pair of planes (z0, z0 + 1) are two
-  // consecutive ranges of segments, each sorted by y; merge them by block row.
-  size_t s = 0;
-  while (s < segments.size()) {
-    const int64_t z0 = blockStart(segments[s].z, oz);
-    size_t plane_end[2], cursor[2];
-    cursor[0] = s;
-    size_t e = s;
-    while (e < segments.size() && segments[e].z == z0) ++e;
-    plane_end[0] = e;
-    cursor[1] = e;
-    while (e < segments.size() && segments[e].z == z0 + 1) ++e;
-    plane_end[1] = e;
-    s = e;
-    for (;;) {
-      int64_t y0 = std::numeric_limits<int64_t>::max();
-      for (int p = 0; p < 2; ++p)
-        if (cursor[p] < plane_end[p]) y0 = std::min(y0, blockStart(segments[cursor[p]].y, oy));
-      if (y0 == std::numeric_limits<int64_t>::max()) break;
-      size_t begin[4], end[4];
-      for (int q = 0; q < 4; ++q) {
-        const int p = q >> 1;
-        const int64_t y = y0 + (q & 1);
-        begin[q] = cursor[p];
-        while (cursor[p] < plane_end[p] && segments[cursor[p]].y == y) ++cursor[p];
-        end[q] = cursor[p];
-      }
-      visitStrip(y0, z0, begin, end);
-    }
-  }
 }
 
 /// Encodes the known (not LocalGrid::kUnknown) cells of @p grid with their

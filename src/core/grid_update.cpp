@@ -1,8 +1,10 @@
 #include "stereo_occupancy/grid_update.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <vector>
 
 namespace stereo_occupancy {
 
@@ -65,6 +67,156 @@ void encodeGridUpdate(const LocalGrid& grid, const Eigen::Vector3d& W_sensor_ori
     update->log_odds.insert(update->log_odds.end(), data + start, data + i);
     update->run_start.push_back(static_cast<uint32_t>(start));
     update->run_length.push_back(static_cast<uint32_t>(i - start));
+  }
+}
+
+namespace {
+
+/// One row's stretch of known cells, [x0, x1) with values from log_odds[v] on.
+struct Segment {
+  int64_t y, z, x0, x1;
+  size_t v;
+};
+
+/// The update's runs cut at the rows' ends (a run may go on into the next
+/// row), sorted by row, then x. Memory and work follow the runs, never the
+/// box the update claims: a message may claim 65535 x 65535 cells and carry one.
+std::vector<Segment> rowSegments(const GridUpdateView& u) {
+  const int64_t nx = u.size.x(), ny = u.size.y();
+  std::vector<Segment> segments;
+  segments.reserve(u.run_start.size());
+  size_t v = 0;
+  for (size_t k = 0; k < u.run_start.size(); ++k) {
+    uint64_t i = u.run_start[k], left = u.run_length[k];
+    while (left > 0) {
+      const int64_t row = static_cast<int64_t>(i / static_cast<uint64_t>(nx));
+      const int64_t x0 = static_cast<int64_t>(i % static_cast<uint64_t>(nx));
+      const int64_t len = std::min<int64_t>(static_cast<int64_t>(left), nx - x0);
+      segments.push_back({row % ny, row / ny, x0, x0 + len, v});
+      v += static_cast<size_t>(len);
+      i += static_cast<uint64_t>(len);
+      left -= static_cast<uint64_t>(len);
+    }
+  }
+  return segments;
+}
+
+/// Local index of the 2x2x2 block (even global index) a local index is in.
+int64_t blockStart(int64_t local, int64_t origin) { return local - ((origin + local) & 1); }
+/// The end of the block a local end index is in.
+int64_t blockEnd(int64_t local_end, int64_t origin) { return local_end + ((origin + local_end) & 1); }
+
+/// The blocks of the update's strips: a strip is the four rows
+/// (y0 + dy, z0 + dz), q = dy + 2 dz, of one line of blocks.
+class StripWalk {
+ public:
+  StripWalk(const GridUpdateView& u, const std::vector<Segment>& segments, const SiblingBlockVisitor& f)
+      : log_odds_(u.log_odds), origin_(u.origin_index.cast<int64_t>()), segments_(segments), f_(f) {}
+
+  /// Visits the strip at (y0, z0) whose segments per row are the ranges
+  /// [begin[q], end[q]) of the segments, a cluster at a time.
+  void visit(int64_t y0, int64_t z0, const size_t (&begin)[4], const size_t (&end)[4]) {
+    size_t next[4] = {begin[0], begin[1], begin[2], begin[3]};
+    for (;;) {
+      // A cluster: the segments whose blocks overlap, in x order; rows_[q] spans it.
+      int64_t xs = std::numeric_limits<int64_t>::max();
+      for (int q = 0; q < 4; ++q)
+        if (next[q] < end[q]) xs = std::min(xs, blockStart(segments_[next[q]].x0, origin_.x()));
+      if (xs == std::numeric_limits<int64_t>::max()) return;
+      size_t first[4], last[4];
+      for (int q = 0; q < 4; ++q) first[q] = last[q] = next[q];
+      int64_t xe = xs;  // the cluster's blocks: [xs, xe), each segment adding at most its length + 2
+      for (bool grew = true; grew;) {
+        grew = false;
+        for (int q = 0; q < 4; ++q)
+          for (; last[q] < end[q] && blockStart(segments_[last[q]].x0, origin_.x()) <= xe; ++last[q], grew = true)
+            xe = std::max(xe, blockEnd(segments_[last[q]].x1, origin_.x()));
+      }
+      fillRows(xs, xe, first, last);
+      for (int q = 0; q < 4; ++q) next[q] = last[q];
+      visitCluster(y0, z0, xs, xe, first, last);
+    }
+  }
+
+ private:
+  /// rows_[q] over the cluster [xs, xe): the values of its segments, NaN where no cell.
+  void fillRows(int64_t xs, int64_t xe, const size_t (&first)[4], const size_t (&last)[4]) {
+    const size_t width = static_cast<size_t>(xe - xs);
+    for (int q = 0; q < 4; ++q) {
+      if (first[q] == last[q]) continue;
+      rows_[q].assign(width, std::numeric_limits<float>::quiet_NaN());
+      for (size_t k = first[q]; k < last[q]; ++k)
+        std::copy(log_odds_.begin() + segments_[k].v,
+                  log_odds_.begin() + segments_[k].v + (segments_[k].x1 - segments_[k].x0),
+                  rows_[q].begin() + (segments_[k].x0 - xs));
+    }
+  }
+
+  /// f() for each block of the cluster [xs, xe) that holds a cell.
+  void visitCluster(int64_t y0, int64_t z0, int64_t xs, int64_t xe, const size_t (&first)[4],
+                    const size_t (&last)[4]) const {
+    for (int64_t x0 = xs; x0 < xe; x0 += 2) {
+      float values[8];
+      bool any = false;
+      for (int q = 0; q < 4; ++q) {
+        if (first[q] == last[q]) {
+          values[2 * q] = values[2 * q + 1] = std::numeric_limits<float>::quiet_NaN();
+          continue;
+        }
+        values[2 * q] = rows_[q][x0 - xs];
+        values[2 * q + 1] = rows_[q][x0 + 1 - xs];
+        any |= (values[2 * q] == values[2 * q]) | (values[2 * q + 1] == values[2 * q + 1]);
+      }
+      if (any)
+        f_(Eigen::Vector3i(static_cast<int>(origin_.x() + x0), static_cast<int>(origin_.y() + y0),
+                           static_cast<int>(origin_.z() + z0)),
+           values);
+    }
+  }
+
+  const ConstArray<float>& log_odds_;
+  const Eigen::Matrix<int64_t, 3, 1> origin_;
+  const std::vector<Segment>& segments_;
+  const SiblingBlockVisitor& f_;
+  std::vector<float> rows_[4];  ///< one cluster's four rows
+};
+
+}  // namespace
+
+void GridUpdateView::forEachSiblingBlock(const SiblingBlockVisitor& f) const {
+  if (log_odds.empty()) return;
+  const std::vector<Segment> segments = rowSegments(*this);
+  StripWalk strips(*this, segments, f);
+  // The strips in z, then y order: a pair of planes (z0, z0 + 1) are two
+  // consecutive ranges of segments, each sorted by y; merge them by block row.
+  const int64_t oy = origin_index.y(), oz = origin_index.z();
+  size_t s = 0;
+  while (s < segments.size()) {
+    const int64_t z0 = blockStart(segments[s].z, oz);
+    size_t plane_end[2], cursor[2];
+    cursor[0] = s;
+    size_t e = s;
+    while (e < segments.size() && segments[e].z == z0) ++e;
+    plane_end[0] = e;
+    cursor[1] = e;
+    while (e < segments.size() && segments[e].z == z0 + 1) ++e;
+    plane_end[1] = e;
+    s = e;
+    for (;;) {
+      int64_t y0 = std::numeric_limits<int64_t>::max();
+      for (int p = 0; p < 2; ++p)
+        if (cursor[p] < plane_end[p]) y0 = std::min(y0, blockStart(segments[cursor[p]].y, oy));
+      if (y0 == std::numeric_limits<int64_t>::max()) break;
+      size_t begin[4], end[4];
+      for (int q = 0; q < 4; ++q) {
+        const int p = q >> 1;
+        const int64_t y = y0 + (q & 1);
+        begin[q] = cursor[p];
+        while (cursor[p] < plane_end[p] && segments[cursor[p]].y == y) ++cursor[p];
+        end[q] = cursor[p];
+      }
+      strips.visit(y0, z0, begin, end);
+    }
   }
 }
 
