@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "scenario_support.h"
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"

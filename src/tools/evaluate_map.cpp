@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "scenario_support.h"
 #include "stereo_occupancy/octomap_io.h"
 #include "stereo_occupancy/sim/map_evaluation.h"
 #include "stereo_occupancy/sim/map_rendering.h"

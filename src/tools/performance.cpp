@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "drawing_benchmark.h"
+#include "scenario_support.h"
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"

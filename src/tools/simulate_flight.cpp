@@ -21,6 +21,7 @@
 #include <string>
 
 #include "progress.h"
+#include "scenario_support.h"
 #include "stereo_occupancy/ros/input_conversions.h"
 #include "stereo_occupancy/sim/flight_simulation.h"
 #include "tool_support.h"

@@ -14,7 +14,6 @@
 
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/parameter_table.h"
-#include "stereo_occupancy/sim/flight_simulation.h"
 
 namespace stereo_occupancy {
 namespace tools {
@@ -67,15 +66,6 @@ inline void applyModelValues(const std::map<std::string, double>& values, Drawin
       throw UsageError("--model: unknown name '" + name + "'");
   std::string why;
   if (!config->isValid(&why)) throw UsageError("--model: " + why);
-}
-
-/// The named simulated flight, or a UsageError listing the names.
-inline FlightScenario scenarioNamed(const std::string& name) {
-  try {
-    return makeScenario(name);
-  } catch (const std::invalid_argument& e) {
-    throw UsageError(e.what());
-  }
 }
 
 /// Runs a tool's body; turns exceptions into one error line and an exit status.
