@@ -8,8 +8,8 @@ out="$repo/build/sanitize"
 rm -rf "$out/obj"  # objects of renamed sources must not link in
 mkdir -p "$out/obj"
 flags=(-std=c++17 -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined -fno-sanitize-recover=undefined
-       -I"$repo/include" -isystem /usr/include/eigen3 -isystem /usr/include/opencv4)
-printf '%s\n' "$repo"/src/core/*.cpp "$repo"/src/sim/*.cpp "$repo"/test/core/*.cpp "$repo"/test/sim/*.cpp \
+       -I"$repo/include" -I"$repo/bench/include" -isystem /usr/include/eigen3 -isystem /usr/include/opencv4)
+printf '%s\n' "$repo"/src/core/*.cpp "$repo"/bench/src/sim/*.cpp "$repo"/test/core/*.cpp "$repo"/test/sim/*.cpp \
   "$repo"/test/gtest_main.cpp |
   xargs -P "$(nproc)" -I{} sh -c 'g++ "$@" -c "{}" -o "'"$out"'/obj/$(basename {} .cpp).o"' _ "${flags[@]}"
 g++ "${flags[@]}" "$out"/obj/*.o -lgtest -lpthread -lopencv_core -lopencv_imgproc -lopencv_imgcodecs -lopencv_calib3d \
