@@ -2,7 +2,7 @@
 # The README and docs/ against the tree: every relative link resolves, and
 # every command in their code blocks names what exists: a launch file and
 # its args (roslaunch stereo_occupancy X.launch a:=...), a script
-# (scripts/X.sh), a tool and its options (rosrun stereo_occupancy TOOL --opt:
+# (scripts/X.sh, bench/scripts/X.sh), a tool and its options (rosrun stereo_occupancy TOOL --opt:
 # TOOL --help lists --opt). Needs a built workspace; writes a JUnit file to
 # $RESULTS if set.
 set -uo pipefail
@@ -37,7 +37,7 @@ for doc in README.md docs/*.md; do
           arg="${w%%:=*}"
           grep -q "<arg name=\"$arg\"" "$launch" || problems+=("$doc: $launch has no arg '$arg'")
         done ;;
-      scripts/*)
+      scripts/* | bench/scripts/*)
         [ -x "${words[0]}" ] || problems+=("$doc: no executable ${words[0]}") ;;
       rosrun)
         [ "${words[1]:-}" = stereo_occupancy ] || continue

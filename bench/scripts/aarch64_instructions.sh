@@ -2,19 +2,19 @@
 # Guest instructions per Table I frame on aarch64 (grid preparation and
 # drawing, one thread), the free run scalar and in NEON, for line_pyramid
 # and the mapper's default: each run under qemu-user with a plugin that
-# counts the instructions executed (scripts/aarch64_count/icount_plugin.c),
+# counts the instructions executed (bench/scripts/aarch64_count/icount_plugin.c),
 # FRAMES frames minus none (the scene's set-up), divided by FRAMES.
 # Needs scripts/cross_aarch64.sh to have built build/aarch64/ first.
 # The counts are exact and repeatable, unlike times under an emulator; they
 # are not cycles (docs/performance.md).
 set -euo pipefail
-repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 out="$repo/build/aarch64"
 frames="${FRAMES:-10}"
 bench="$out/build/stereo_occupancy_draw_frames"
 [ -x "$bench" ] || { echo "aarch64_instructions: run scripts/cross_aarch64.sh first ($bench is missing)" >&2; exit 1; }
 plugin="$out/icount_plugin.so"
-gcc -shared -fPIC -O2 -Wall -Wextra -o "$plugin" "$repo/scripts/aarch64_count/icount_plugin.c"
+gcc -shared -fPIC -O2 -Wall -Wextra -o "$plugin" "$repo/bench/scripts/aarch64_count/icount_plugin.c"
 
 log="$out/aarch64_instructions.log"
 count() {  # algorithm simd frames -> guest instructions of the whole process

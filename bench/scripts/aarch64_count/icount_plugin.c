@@ -1,5 +1,5 @@
 /* A qemu-user TCG plugin that counts the guest instructions a process
-   executes and prints the count at its exit (scripts/aarch64_instructions.sh).
+   executes and prints the count at its exit (bench/scripts/aarch64_instructions.sh).
    Debian ships qemu-user with plugin support but without qemu-plugin.h: the
    few declarations of its plugin API (version 1, qemu 7.x) are written out
    here. Built for the host:  gcc -shared -fPIC -O2 icount_plugin.c */

@@ -1,7 +1,7 @@
 // Draws the Table I frame N times (grid preparation and drawing, no blur)
 // with one algorithm and one free-run instruction set, for counting the
 // guest instructions a frame takes under qemu-user
-// (scripts/aarch64_instructions.sh): the difference between N and 0 frames
+// (bench/scripts/aarch64_instructions.sh): the difference between N and 0 frames
 // is N frames' drawing, without the scene's set-up.
 //   draw_frames line_pyramid|default scalar|neon|sse2 N
 #include <cstdio>

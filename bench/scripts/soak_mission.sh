@@ -3,14 +3,14 @@
 # (simulate_flight --scenario mission, scenery generated along a 7 km path)
 # replayed at RATE times real time through launch/replay.launch, with one
 # subscriber on every map output as rviz and a planner would have
-# (scripts/soak_monitor.py), sampling each second the manager's resident
+# (bench/scripts/soak_monitor.py), sampling each second the manager's resident
 # memory, the bytes each output carried and the nodelets' diagnostics. Writes
 # OUT_DIR/soak.csv, OUT_DIR/soak.png (figures over time), OUT_DIR/summary.md
 # and the map saved at shutdown. Assumes scripts/build.sh has run.
 #
 #   DURATION_S=1800 (the flight's length)  RATE=2  OUT_DIR=build/soak  ROS_PORT=11393
 set -euo pipefail
-repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 ws="${WS:-$repo/build/ws}"
 duration="${DURATION_S:-1800}"
 rate="${RATE:-2}"
@@ -56,7 +56,7 @@ for _ in $(seq 100); do
   sleep 0.1
 done
 [ -n "$manager" ] || { echo "the nodelet manager did not start; see $out/launch.log"; exit 1; }
-/usr/bin/python3 "$repo/scripts/soak_monitor.py" "$out/soak.csv" "$manager" 2> "$out/monitor.log" &
+/usr/bin/python3 "$repo/bench/scripts/soak_monitor.py" "$out/soak.csv" "$manager" 2> "$out/monitor.log" &
 monitor=$!
 wait $launch || true  # replay.launch ends with the bag (the accumulator saves the map on shutdown)
 kill -INT $monitor 2>/dev/null || true
