@@ -41,6 +41,9 @@ docs_status=$?
 # The C++ follows .clang-format.
 RESULTS="$results" "$repo/scripts/check_format.sh"
 format_status=$?
+# The install space holds the product and nothing of bench/.
+RESULTS="$results" "$repo/scripts/check_install.sh"
+install_status=$?
 
 summary="$(catkin_test_results build/test_results --verbose)"
 status=$?
@@ -56,7 +59,9 @@ failed=$(cat build/test_results/*/*.xml | grep -oE '<(failure|error)[ >]' | wc -
 [ $rviz_status = 0 ] || [ -f "$results/rviz.xml" ] || failed=$((failed + 1))
 [ $docs_status = 0 ] || [ -f "$results/docs.xml" ] || failed=$((failed + 1))
 [ $format_status = 0 ] || [ -f "$results/format.xml" ] || failed=$((failed + 1))
+[ $install_status = 0 ] || [ -f "$results/install.xml" ] || failed=$((failed + 1))
 [ $aarch64_status = 0 ] || [ -f "$results/aarch64-core.xml" ] || failed=$((failed + 1))
 echo "tests: $((cases - failed)) passed, $failed failed"
 [ $status = 0 ] && [ $sanitize_status = 0 ] && [ $fuzz_status = 0 ] && [ $online_offline_status = 0 ] &&
-  [ $rviz_status = 0 ] && [ $docs_status = 0 ] && [ $format_status = 0 ] && [ $aarch64_status = 0 ]
+  [ $rviz_status = 0 ] && [ $docs_status = 0 ] && [ $format_status = 0 ] && [ $install_status = 0 ] &&
+  [ $aarch64_status = 0 ]
