@@ -2,9 +2,9 @@
 # The README and docs/ against the tree: every relative link resolves, and
 # every command in their code blocks names what exists: a launch file and
 # its args (roslaunch stereo_occupancy X.launch a:=...), a script
-# (scripts/X.sh, bench/scripts/X.sh), a tool and its options (rosrun stereo_occupancy TOOL --opt:
-# TOOL --help lists --opt). Needs a built workspace; writes a JUnit file to
-# $RESULTS if set.
+# (scripts/X.sh, bench/scripts/X.sh), a tool and its options (rosrun
+# stereo_occupancy TOOL --opt: TOOL --help lists --opt). Needs a built
+# workspace; writes a JUnit file to $RESULTS if set.
 set -uo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bin="${WS:-$repo/build/ws}/devel/lib/stereo_occupancy"

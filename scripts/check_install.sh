@@ -24,8 +24,13 @@ trap 'rm -rf "$prefix"' EXIT
 log="$ws/build/check_install.log"
 problems=()
 
+# The install's libraries first, none of the workspace's (devel/lib): a
+# library the install lacks must not be found there.
+libs="$prefix/lib$(echo "${LD_LIBRARY_PATH:-}" | tr ':' '\n' | grep -v "^$ws/" | grep . | sed 's/^/:/' | tr -d '\n')"
+
 if ! cmake --install "$build" --prefix "$prefix" >"$log" 2>&1; then
-  problems+=("cmake --install $build failed (is the workspace built? scripts/build.sh): $(tail -n 3 "$log" | tr '\n' ' ')")
+  why="$(grep -m1 -A4 'CMake Error' "$log" | tr -s ' \n' ' ')"
+  problems+=("cmake --install failed (is the workspace built and up to date? scripts/build.sh): $why(see $log)")
 else
   pkg_lib="$prefix/lib/stereo_occupancy"
   share="$prefix/share/stereo_occupancy"
@@ -51,12 +56,12 @@ else
   [ "$installed" = "$expected" ] ||
     problems+=("the installed tools are [$(echo $installed)], the user's tools (src/tools/) [$(echo $expected)]")
   for t in $expected; do
-    [ ! -x "$pkg_lib/$t" ] || LD_LIBRARY_PATH="$prefix/lib" "$pkg_lib/$t" --help >/dev/null 2>&1 ||
+    [ ! -x "$pkg_lib/$t" ] || LD_LIBRARY_PATH="$libs" "$pkg_lib/$t" --help >/dev/null 2>&1 ||
       problems+=("lib/stereo_occupancy/$t --help fails with the install's libraries")
   done
   for f in "$prefix"/lib/*.so "$pkg_lib"/*; do
     [ -f "$f" ] || continue
-    missing="$(LD_LIBRARY_PATH="$prefix/lib" ldd "$f" 2>/dev/null | grep 'not found' | awk '{print $1}' | tr '\n' ' ')"
+    missing="$(LD_LIBRARY_PATH="$libs" ldd "$f" 2>/dev/null | grep 'not found' | awk '{print $1}' | tr '\n' ' ')"
     [ -z "$missing" ] || problems+=("${f#"$prefix"/} needs what the install lacks: $missing")
   done
 
