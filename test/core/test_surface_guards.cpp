@@ -29,6 +29,37 @@ SurfaceGuards skyAndGap(float sky, int sky_radius, float free, int gap_radius) {
   guards.gap_radius = gap_radius;
   return guards;
 }
+
+/// A grid of @p size whose cells take one of @p kinds (6 values) at random,
+/// with runs of 1-5 hits along x, a run starting at a cell with probability
+/// @p run_start.
+LocalGrid randomGridWithRuns(const Eigen::Vector3i& size, const float (&kinds)[6], float hit, double run_start,
+                             unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> kind(0, 5), run_length(1, 5);
+  std::bernoulli_distribution starts_run(run_start);
+  LocalGrid grid;
+  grid.reset({0, 0, 0}, size, kCell);
+  for (size_t i = 0; i < grid.numCells(); ++i) grid.data()[i] = kinds[kind(rng)];
+  for (int z = 0; z < size.z(); ++z)
+    for (int y = 0; y < size.y(); ++y)
+      for (int x = 0; x < size.x(); ++x)
+        if (starts_run(rng))
+          for (int end = std::min(size.x(), x + run_length(rng)); x < end; ++x) grid.at(x, y, z) = hit;
+  return grid;
+}
+
+/// The flags of the blocks that hold a cell of value @p hit, as the lines flag them (LineDrawer::hitBlocks()).
+std::vector<uint8_t> hitBlockFlags(const LocalGrid& grid, float hit) {
+  std::vector<uint8_t> flags(grid.numBlocks(), 0);
+  const Eigen::Vector3i n = grid.size();
+  for (int z = 0; z < n.z(); ++z)
+    for (int y = 0; y < n.y(); ++y)
+      for (int x = 0; x < n.x(); ++x)
+        if (grid.at(x, y, z) == hit)
+          flags[(static_cast<size_t>(z) * n.y() + y) * grid.blocksPerRow() + x / kInformationBlock] = 1;
+  return flags;
+}
 }  // namespace
 
 // The guard itself: only cells holding exactly the given value, only within
@@ -141,18 +172,8 @@ TEST(SurfaceGuards, BothGuardsAtOnceAreTheGapGuardThenTheSkyGuard) {
 TEST(SurfaceGuards, BothGuardsMatchAPlainReferenceAroundRunsOfHits) {
   const float free = -0.85f, sky = std::nextafter(free, -1.0f), hit = 0.9f;
   const float kinds[] = {LocalGrid::kUnknown, sky, sky, free, 0.0f, 0.0f};
-  std::mt19937 rng(11);
-  std::uniform_int_distribution<int> kind(0, 5), run_length(1, 5);
-  std::bernoulli_distribution starts_run(0.04);
-  LocalGrid drawn;
-  drawn.reset({0, 0, 0}, {37, 6, 9}, kCell);
+  const LocalGrid drawn = randomGridWithRuns({37, 6, 9}, kinds, hit, 0.04, 11);
   const Eigen::Vector3i n = drawn.size();
-  for (size_t i = 0; i < drawn.numCells(); ++i) drawn.data()[i] = kinds[kind(rng)];
-  for (int z = 0; z < n.z(); ++z)
-    for (int y = 0; y < n.y(); ++y)
-      for (int x = 0; x < n.x(); ++x)
-        if (starts_run(rng))
-          for (int end = std::min(n.x(), x + run_length(rng)); x < end; ++x) drawn.at(x, y, z) = hit;
   std::vector<int> nearest(drawn.numCells(), 1 << 20);  // Chebyshev distance to the nearest hit
   for (int z = 0; z < n.z(); ++z)
     for (int y = 0; y < n.y(); ++y)
@@ -165,12 +186,7 @@ TEST(SurfaceGuards, BothGuardsMatchAPlainReferenceAroundRunsOfHits) {
                 best = std::min(best, std::max({std::abs(h - x), std::abs(j - y), std::abs(k - z)}));
               }
   auto nearestHit = [&](int x, int y, int z) { return nearest[drawn.linearIndex(x, y, z)]; };
-  std::vector<uint8_t> hit_blocks(drawn.numBlocks(), 0);  // 3 blocks a row, the last of 5 cells
-  for (int z = 0; z < n.z(); ++z)
-    for (int y = 0; y < n.y(); ++y)
-      for (int x = 0; x < n.x(); ++x)
-        if (drawn.at(x, y, z) == hit)
-          hit_blocks[(static_cast<size_t>(z) * n.y() + y) * drawn.blocksPerRow() + x / kInformationBlock] = 1;
+  const std::vector<uint8_t> hit_blocks = hitBlockFlags(drawn, hit);  // 3 blocks a row, the last of 5 cells
   for (const auto& [sky_radius, gap_radius] :
        {std::pair{1, 2}, std::pair{2, 1}, std::pair{1, 1}, std::pair{2, 2}, std::pair{1, 0}, std::pair{2, 0}}) {
     LocalGrid expected = drawn;
@@ -295,26 +311,14 @@ TEST(SurfaceGuards, EdgeGuardSilencesFreeSpaceBesideAHitNotInFrontOfIt) {
 TEST(SurfaceGuards, EdgeGuardMatchesAPlainReference) {
   const float free = -0.85f, sky = std::nextafter(free, -1.0f), hit = 0.9f;
   const float kinds[] = {LocalGrid::kUnknown, sky, free, free, free, 0.0f};
-  std::mt19937 rng(5);
-  std::uniform_int_distribution<int> kind(0, 5), run_length(1, 5);
-  std::bernoulli_distribution starts_run(0.03);
-  LocalGrid drawn;
-  drawn.reset({0, 0, 0}, {35, 7, 9}, kCell);
+  const LocalGrid drawn = randomGridWithRuns({35, 7, 9}, kinds, hit, 0.03, 5);
   const Eigen::Vector3i n = drawn.size();
-  for (size_t i = 0; i < drawn.numCells(); ++i) drawn.data()[i] = kinds[kind(rng)];
   std::vector<Eigen::Vector3i> hits;
   for (int z = 0; z < n.z(); ++z)
     for (int y = 0; y < n.y(); ++y)
       for (int x = 0; x < n.x(); ++x)
-        if (starts_run(rng))
-          for (int end = std::min(n.x(), x + run_length(rng)); x < end; ++x) drawn.at(x, y, z) = hit;
-  for (int z = 0; z < n.z(); ++z)
-    for (int y = 0; y < n.y(); ++y)
-      for (int x = 0; x < n.x(); ++x)
         if (drawn.at(x, y, z) == hit) hits.emplace_back(x, y, z);
-  std::vector<uint8_t> hit_blocks(drawn.numBlocks(), 0);
-  for (const Eigen::Vector3i& c : hits)
-    hit_blocks[(static_cast<size_t>(c.z()) * n.y() + c.y()) * drawn.blocksPerRow() + c.x() / kInformationBlock] = 1;
+  const std::vector<uint8_t> hit_blocks = hitBlockFlags(drawn, hit);
   const Eigen::Vector3d camera(-3.0, 12.0, 20.0);  // above and to the side: rays cross every axis
   for (int gap_radius : {0, 1}) {
     LocalGrid expected = drawn;
