@@ -5,7 +5,7 @@ set -euo pipefail
 
 PACKAGES=(
   build-essential cmake catkin python3-catkin-pkg python3-empy
-  libeigen3-dev libopencv-dev liboctomap-dev libsqlite3-dev pkg-config libgtest-dev clang libclang-rt-14-dev
+  libeigen3-dev libopencv-dev liboctomap-dev libdynamicedt3d-dev libsqlite3-dev pkg-config libgtest-dev clang libclang-rt-14-dev
   sqlite3  # the CLI tests damage a database row as another program would
   clang-format  # scripts/check_format.sh
   ros-base-dev libroscpp-dev ros-message-generation libnodeletlib-dev pluginlib-dev
