@@ -17,6 +17,7 @@
 #include "stereo_occupancy/line_drawing.h"
 #include "stereo_occupancy/local_grid.h"
 #include "stereo_occupancy/ray_tracing.h"
+#include "stereo_occupancy/stage_times.h"
 #include "stereo_occupancy/stereo_camera_model.h"
 #include "stereo_occupancy/worker_pool.h"
 
@@ -138,8 +139,14 @@ class DisparityDrawer {
   /// tests): the min pyramid for line drawing, the max pyramid for ray tracing.
   const DisparityPyramid& pyramid() const { return drawsLines() ? min_pyramid_ : max_pyramid_; }
 
+  /// From now on adds each stage's time (grid preparation, pyramids,
+  /// drawing, guards, blur) to @p times; null: no timing (the default).
+  void setStageTimes(StageTimes* times) { stage_times_ = times; }
+
  private:
   void checkInput(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C) const;
+  /// The pyramids the algorithm draws from (none for kLine).
+  void buildPyramids(const cv::Mat& disparity);
 
   StereoCameraModel camera_;
   DrawingConfig config_;
@@ -158,6 +165,7 @@ class DisparityDrawer {
   DisparityPyramid max_pyramid_;  ///< for ray tracing (section VI-C) and both bounded variants
   DistanceDependentBlur blur_;
   std::unique_ptr<WorkerPool> workers_;  ///< the line drawing's and the blur's; none for one thread
+  StageTimes* stage_times_ = nullptr;    ///< setStageTimes()
 };
 
 }  // namespace stereo_occupancy

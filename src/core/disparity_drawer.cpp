@@ -134,6 +134,7 @@ std::string cellCount(double cells) {
 void DisparityDrawer::prepareGrid(const Eigen::Isometry3d& T_W_C, LocalGrid* grid) const {
   // One cell of padding keeps every line strictly inside the grid (the fast
   // path of LineDrawer::drawRay); the blur needs room for its kernels.
+  const StageTimer timer(stage_times_, PathStage::kGridPreparation);
   const int padding = 1 + blur_.paddingCells(camera_.config().max_range_m, config_.resolution_m);
   const Eigen::AlignedBox3d box = frustumBoundingBox(camera_, T_W_C);
   // Global cell indices are ints (and OctoMap keys 16 bits): refuse poses
@@ -151,34 +152,32 @@ void DisparityDrawer::prepareGrid(const Eigen::Isometry3d& T_W_C, LocalGrid* gri
 DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C, LocalGrid* grid) {
   checkInput(disparity, T_W_C);
   DrawStatistics stats;
-  switch (config_.algorithm) {
-    case DrawingAlgorithm::kLine:
-      line_drawer_.drawImage(disparity, T_W_C, grid, &stats);
-      break;
-    case DrawingAlgorithm::kLinePyramid:
-      min_pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel(), workers_.get());
-      line_drawer_.drawPyramid(min_pyramid_, T_W_C, grid, &stats);
-      break;
-    case DrawingAlgorithm::kRayTrace:
-      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, 0,
-                         workers_.get());  // level 0: the image as is
-      ray_tracer_.drawImage(max_pyramid_, T_W_C, grid, &stats);
-      break;
-    case DrawingAlgorithm::kRayTracePyramid:
-      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel(), workers_.get());
-      ray_tracer_.drawPyramid(max_pyramid_, T_W_C, grid, &stats);
-      break;
-    case DrawingAlgorithm::kLinePyramidBounded:
-    case DrawingAlgorithm::kRayTracePyramidBounded:
-      DisparityPyramid::buildPyramids(disparity, camera_, levels_.topLevel(), &min_pyramid_, &max_pyramid_,
-                                      workers_.get());
-      if (config_.algorithm == DrawingAlgorithm::kLinePyramidBounded)
+  buildPyramids(disparity);
+  {
+    const StageTimer timer(stage_times_, PathStage::kDrawing);
+    switch (config_.algorithm) {
+      case DrawingAlgorithm::kLine:
+        line_drawer_.drawImage(disparity, T_W_C, grid, &stats);
+        break;
+      case DrawingAlgorithm::kLinePyramid:
+        line_drawer_.drawPyramid(min_pyramid_, T_W_C, grid, &stats);
+        break;
+      case DrawingAlgorithm::kRayTrace:
+        ray_tracer_.drawImage(max_pyramid_, T_W_C, grid, &stats);
+        break;
+      case DrawingAlgorithm::kRayTracePyramid:
+        ray_tracer_.drawPyramid(max_pyramid_, T_W_C, grid, &stats);
+        break;
+      case DrawingAlgorithm::kLinePyramidBounded:
         line_drawer_.drawPyramidBounded(min_pyramid_, max_pyramid_, *bound_, T_W_C, grid, &stats);
-      else
+        break;
+      case DrawingAlgorithm::kRayTracePyramidBounded:
         ray_tracer_.drawPyramidBounded(min_pyramid_, max_pyramid_, *bound_, T_W_C, grid, &stats);
-      break;
+        break;
+    }
   }
   if (config_.sensor_model.profile == SensorProfile::kSurface) {
+    const StageTimer timer(stage_times_, PathStage::kGuards);
     // The lines flag where they put their hits, the surface profile's only occupied cells.
     const std::vector<uint8_t>& hit_blocks = line_drawer_.hitBlocks();
     SurfaceGuards guards;
@@ -195,7 +194,32 @@ DrawStatistics DisparityDrawer::drawInto(const cv::Mat& disparity, const Eigen::
   return stats;
 }
 
-void DisparityDrawer::blur(const Eigen::Isometry3d& T_W_C, LocalGrid* grid) { blur_.apply(T_W_C.translation(), grid); }
+void DisparityDrawer::buildPyramids(const cv::Mat& disparity) {
+  const StageTimer timer(stage_times_, PathStage::kPyramids);
+  switch (config_.algorithm) {
+    case DrawingAlgorithm::kLine:
+      break;  // the image as is
+    case DrawingAlgorithm::kLinePyramid:
+      min_pyramid_.build(disparity, camera_, PyramidType::kMinDisparity, levels_.topLevel(), workers_.get());
+      break;
+    case DrawingAlgorithm::kRayTrace:  // level 0: the image as is
+      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, 0, workers_.get());
+      break;
+    case DrawingAlgorithm::kRayTracePyramid:
+      max_pyramid_.build(disparity, camera_, PyramidType::kMaxDisparity, levels_.topLevel(), workers_.get());
+      break;
+    case DrawingAlgorithm::kLinePyramidBounded:
+    case DrawingAlgorithm::kRayTracePyramidBounded:
+      DisparityPyramid::buildPyramids(disparity, camera_, levels_.topLevel(), &min_pyramid_, &max_pyramid_,
+                                      workers_.get());
+      break;
+  }
+}
+
+void DisparityDrawer::blur(const Eigen::Isometry3d& T_W_C, LocalGrid* grid) {
+  const StageTimer timer(stage_times_, PathStage::kBlur);
+  blur_.apply(T_W_C.translation(), grid);
+}
 
 DrawStatistics DisparityDrawer::draw(const cv::Mat& disparity, const Eigen::Isometry3d& T_W_C, LocalGrid* grid) {
   checkInput(disparity, T_W_C);

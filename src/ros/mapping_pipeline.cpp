@@ -51,6 +51,7 @@ OccupancyUpdatePtr FrameMapping::finish(FrameOutcome outcome, std::string why, F
 OccupancyUpdatePtr FrameMapping::map(const stereo_msgs::DisparityImageConstPtr& msg,
                                      const sensor_msgs::CameraInfoConstPtr& info, const tf2::BufferCore& tf,
                                      const ros::Time& now, FrameResult* result) {
+  StageTimer input(stage_times_, PathStage::kInput);
   *result = FrameResult();
   ++counters_.images;
   if (msg->image.encoding != sensor_msgs::image_encodings::TYPE_32FC1)
@@ -68,7 +69,7 @@ OccupancyUpdatePtr FrameMapping::map(const stereo_msgs::DisparityImageConstPtr& 
   }
   try {
     const cv_bridge::CvImageConstPtr image = cv_bridge::toCvShare(msg->image, msg);  // a view, no copy
-    return mapDisparity(image->image, msg->header, camera, tf, now, result);
+    return mapDisparity(image->image, msg->header, camera, tf, now, result, &input);
   } catch (const std::exception& e) {  // cv_bridge, bad_alloc: one image fails, the pipeline goes on
     return finish(FrameOutcome::kRefused, std::string("mapping failed: ") + e.what(), result);
   }
@@ -77,6 +78,7 @@ OccupancyUpdatePtr FrameMapping::map(const stereo_msgs::DisparityImageConstPtr& 
 OccupancyUpdatePtr FrameMapping::mapDepth(const sensor_msgs::ImageConstPtr& msg,
                                           const sensor_msgs::CameraInfoConstPtr& info, const tf2::BufferCore& tf,
                                           const ros::Time& now, FrameResult* result) {
+  StageTimer input(stage_times_, PathStage::kInput);
   *result = FrameResult();
   ++counters_.images;
   if (!info) return finish(FrameOutcome::kRefused, "no camera_info received yet", result);
@@ -90,7 +92,7 @@ OccupancyUpdatePtr FrameMapping::mapDepth(const sensor_msgs::ImageConstPtr& msg,
   try {
     const cv_bridge::CvImageConstPtr depth = cv_bridge::toCvShare(msg);
     depthToDisparity(depth->image, camera.baseline_m * camera.focal_length_px, &depth_disparity_);
-    return mapDisparity(depth_disparity_, msg->header, camera, tf, now, result);
+    return mapDisparity(depth_disparity_, msg->header, camera, tf, now, result, &input);
   } catch (const std::exception& e) {
     return finish(FrameOutcome::kRefused, std::string("mapping failed: ") + e.what(), result);
   }
@@ -98,7 +100,7 @@ OccupancyUpdatePtr FrameMapping::mapDepth(const sensor_msgs::ImageConstPtr& msg,
 
 OccupancyUpdatePtr FrameMapping::mapDisparity(const cv::Mat& disparity, const std_msgs::Header& header,
                                               const StereoCameraConfig& camera, const tf2::BufferCore& tf,
-                                              const ros::Time& now, FrameResult* result) {
+                                              const ros::Time& now, FrameResult* result, StageTimer* input) {
   // tf2 reads time 0 as "the latest pose": the image would be drawn where
   // the camera is now, not where it was.
   if (header.stamp.isZero()) return finish(FrameOutcome::kRefused, "image stamped 0 (no time, no pose)", result);
@@ -117,18 +119,23 @@ OccupancyUpdatePtr FrameMapping::mapDisparity(const cv::Mat& disparity, const st
     return finish(FrameOutcome::kRefused, "camera pose is not finite or its quaternion not of unit norm", result);
   DisparityDrawer* drawer = drawerFor(camera, result);
   if (!drawer) return finish(FrameOutcome::kRefused, refused_setup_, result);
+  input->stop();
   try {
     drawer->draw(disparity, T_W_C, &grid_);
   } catch (const std::invalid_argument& e) {
     return finish(FrameOutcome::kRefused, e.what(), result);
   }
   GridUpdate update;
-  update.log_odds.reserve(last_cells_);
-  update.run_start.reserve(last_runs_);
-  update.run_length.reserve(last_runs_);
-  encodeGridUpdate(grid_, T_W_C.translation(), &update);
-  last_cells_ = update.log_odds.size();
-  last_runs_ = update.run_start.size();
+  {
+    const StageTimer timer(stage_times_, PathStage::kEncoding);
+    update.log_odds.reserve(last_cells_);
+    update.run_start.reserve(last_runs_);
+    update.run_length.reserve(last_runs_);
+    encodeGridUpdate(grid_, T_W_C.translation(), &update);
+    last_cells_ = update.log_odds.size();
+    last_runs_ = update.run_start.size();
+  }
+  StageTimer message(stage_times_, PathStage::kMessage);
   auto msg = boost::make_shared<OccupancyUpdate>();
   std_msgs::Header out_header = header;
   out_header.frame_id = params_.world_frame;
@@ -152,6 +159,7 @@ DisparityDrawer* FrameMapping::drawerFor(const StereoCameraConfig& camera, Frame
   if (!refused_setup_.empty() && refused_camera_ == camera) return nullptr;
   try {
     drawer_ = std::make_unique<DisparityDrawer>(camera, params_.drawing);  // builds the lookup tables
+    drawer_->setStageTimes(stage_times_);
     refused_setup_.clear();
     return drawer_.get();
   } catch (const std::invalid_argument& e) {
@@ -161,6 +169,11 @@ DisparityDrawer* FrameMapping::drawerFor(const StereoCameraConfig& camera, Frame
     result->setup_refused_now = true;
     return nullptr;
   }
+}
+
+void FrameMapping::setStageTimes(StageTimes* times) {
+  stage_times_ = times;
+  if (drawer_) drawer_->setStageTimes(times);
 }
 
 MapFusion::MapFusion(const OctomapAccumulatorParameters& params)
@@ -183,12 +196,15 @@ bool MapFusion::fuse(const OccupancyUpdate& msg, std::string* why, const std::st
     return refuse("frame '" + msg.header.frame_id + "', the map is in '" + frame_id_ + "'", why);
   GridUpdateView update;
   std::string reason;
+  StageTimer fusion(stage_times_, PathStage::kFusion);
   if (!viewOf(msg, &update, &reason) || !mission_.integrate(update, &reason)) return refuse(reason, why);
+  fusion.stop();
   if (frame_id_.empty()) frame_id_ = msg.header.frame_id;  // world_frame "": the first update's, from then on
   last_stamp_ = msg.header.stamp;
   // Pruning follows the updates' time, so that a replay prunes where the flight did.
   if (last_prune_.isZero() || last_stamp_ < last_prune_) last_prune_ = last_stamp_;
   if ((last_stamp_ - last_prune_).toSec() > params_.prune_period_s) {
+    const StageTimer timer(stage_times_, PathStage::kMaintenance);
     const MaintainResult kept = mission_.maintain();
     counters_.leaves_pruned += kept.leaves_dropped;
     counters_.tiles_stored += kept.tiles_stored;

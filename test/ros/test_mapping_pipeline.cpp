@@ -20,6 +20,7 @@
 #include "stereo_occupancy/ros/mapping_pipeline.h"
 #include "stereo_occupancy/ros/parameters.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
+#include "stereo_occupancy/stage_times.h"
 
 using namespace stereo_occupancy;
 
@@ -83,6 +84,47 @@ TEST_F(PipelineTest, AnImageWithItsPoseBecomesAnUpdateTheMapFuses) {
   EXPECT_GT(wall->getLogOdds(), 0.0f);
   EXPECT_EQ(mapping.counters().mapped, 1u);
   EXPECT_EQ(mapping.counters().images, 1u);
+}
+
+// The stage timing (performance --stages) accounts for the whole path, adds
+// up over frames, stops when taken away, and changes nothing in the update.
+TEST_F(PipelineTest, StageTimesAccountForThePathAndChangeNothing) {
+  DisparityMapperParameters params;
+  params.drawing.blur.sigma_trans_m = 0.1;  // a blur to time
+  FrameMapping timed{params}, untimed{params};
+  MapFusion fusion{OctomapAccumulatorParameters()};
+  StageTimes times;
+  timed.setStageTimes(&times);
+  fusion.setStageTimes(&times);
+  FrameResult result;
+  std::string why;
+  const auto t0 = std::chrono::steady_clock::now();
+  const OccupancyUpdatePtr update = timed.map(frame(10.0), nullptr, tf_, ros::Time(10.0), &result);
+  ASSERT_TRUE(update) << result.why;
+  ASSERT_TRUE(fusion.fuse(*update, &why)) << why;
+  const double wall_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  for (PathStage stage :
+       {PathStage::kInput, PathStage::kGridPreparation, PathStage::kPyramids, PathStage::kDrawing, PathStage::kGuards,
+        PathStage::kBlur, PathStage::kEncoding, PathStage::kMessage, PathStage::kFusion})
+    EXPECT_GT(times[stage], 0.0) << toString(stage);
+  EXPECT_EQ(times[PathStage::kMaintenance], 0.0);  // not due after one update
+  EXPECT_LE(times.total(), wall_ms);
+  EXPECT_GT(times[PathStage::kDrawing], times[PathStage::kMessage]);
+
+  const OccupancyUpdatePtr same = untimed.map(frame(10.0), nullptr, tf_, ros::Time(10.0), &result);
+  ASSERT_TRUE(same);
+  EXPECT_EQ(same->log_odds, update->log_odds);
+  EXPECT_EQ(same->run_start, update->run_start);
+
+  const StageTimes after_one = times;
+  ASSERT_TRUE(timed.map(frame(11.0), nullptr, tf_, ros::Time(11.0), &result));
+  EXPECT_GT(times[PathStage::kDrawing], after_one[PathStage::kDrawing]);  // summed over frames
+  EXPECT_EQ(times[PathStage::kFusion], after_one[PathStage::kFusion]);    // not fused
+  EXPECT_FALSE(timed.map(frame(12.0, /*with_pose=*/false), nullptr, tf_, ros::Time(12.0), &result));
+  const StageTimes refused = times;
+  timed.setStageTimes(nullptr);
+  ASSERT_TRUE(timed.map(frame(13.0), nullptr, tf_, ros::Time(13.0), &result));
+  EXPECT_EQ(times.ms, refused.ms);  // no longer timed
 }
 
 TEST_F(PipelineTest, PosesLateOrMissingAndStampZeroAreNotMapped) {

@@ -8,6 +8,9 @@
 // valgrind --tool=callgrind).
 
 #include <octomap/octomap.h>
+#include <ros/time.h>
+#include <stereo_msgs/DisparityImage.h>
+#include <tf2/buffer_core.h>
 
 #include <algorithm>
 #include <chrono>
@@ -25,8 +28,11 @@
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
+#include "stereo_occupancy/ros/input_conversions.h"
+#include "stereo_occupancy/ros/mapping_pipeline.h"
 #include "stereo_occupancy/sim/flight_simulation.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
+#include "stereo_occupancy/stage_times.h"
 #include "stereo_occupancy/time_statistics.h"
 #include "tool_support.h"
 
@@ -120,6 +126,72 @@ int flightPath(const std::string& scenario_name, long pace_ms, int threads, bool
   return 0;
 }
 
+/// The whole path as the nodelets run it, image in to map fused: a
+/// DisparityImage message and its pose on tf into FrameMapping, its update
+/// into MapFusion, with the nodelets' defaults on @p threads threads, stage
+/// by stage (stage_times.h), frame @p frames[k] of @p scenario for each k.
+/// The messages are made beforehand (a camera driver's work).
+int wholePath(const so::FlightScenario& scenario, const std::vector<size_t>& frames, const std::string& title,
+              int threads) {
+  so::DisparityMapperParameters mapper;
+  mapper.drawing.threads = threads;
+  so::OctomapAccumulatorParameters accumulator;
+  accumulator.map.threads = threads;
+  accumulator.map.resolution_m = mapper.drawing.resolution_m;
+  so::FrameMapping mapping(mapper);
+  so::MapFusion fusion(accumulator);
+  so::StageTimes times;
+  mapping.setStageTimes(&times);
+  fusion.setStageTimes(&times);
+  tf2::BufferCore tf(ros::Duration(1e6));  // every pose of the run
+  std::vector<stereo_msgs::DisparityImageConstPtr> images;
+  const ros::Time start(1000.0);
+  for (size_t k = 0; k < frames.size(); ++k) {
+    const ros::Time stamp = start + ros::Duration(0.1 * static_cast<double>(k));
+    tf.setTransform(so::toTransformMsg(scenario.T_W_B[frames[k]], stamp, "map", "base_link"), "performance");
+    tf.setTransform(so::toTransformMsg(scenario.T_B_C, stamp, "base_link", "camera_optical"), "performance");
+    std_msgs::Header header;
+    header.stamp = stamp;
+    header.frame_id = "camera_optical";
+    auto msg = boost::make_shared<stereo_msgs::DisparityImage>();
+    so::toDisparityImageMsg(so::renderStereoFrame(scenario, frames[k], 1), header, scenario.camera,
+                            scenario.effects.max_search_disparity_px, scenario.effects.subpixel_step_px, msg.get());
+    images.push_back(msg);
+  }
+  std::vector<std::vector<double>> stage_ms(so::kPathStages);
+  std::vector<double> whole_ms, outside_ms;
+  size_t fused = 0;
+  for (const auto& image : images) {
+    times = so::StageTimes();
+    so::FrameResult result;
+    std::string why;
+    const auto t0 = Clock::now();
+    const so::OccupancyUpdatePtr update = mapping.map(image, nullptr, tf, image->header.stamp, &result);
+    if (update && fusion.fuse(*update, &why)) ++fused;
+    const double whole = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+    whole_ms.push_back(whole);
+    outside_ms.push_back(whole - times.total());
+    for (size_t s = 0; s < so::kPathStages; ++s) stage_ms[s].push_back(times.ms[s]);
+  }
+  const so::TimeStatistics whole = so::TimeStatistics::of(whole_ms);
+  std::cout << title << ": the whole path as the nodelets run it (FrameMapping, MapFusion; the defaults: "
+            << so::toString(mapper.drawing.algorithm) << ", " << mapper.drawing.resolution_m << " m cells), "
+            << threadsText(threads) << "; " << fused << " of " << images.size()
+            << " images fused. Per frame [ms]; share: of the mean whole path.\n\n"
+               "| stage | mean | median | p99 | max | share |\n|---|---:|---:|---:|---:|---:|\n";
+  auto row = [&](const std::string& name, const std::vector<double>& ms) {
+    const so::TimeStatistics t = so::TimeStatistics::of(ms);
+    std::cout << std::fixed << std::setprecision(3) << "| " << name << " | " << t.mean_ms << " | " << t.median_ms
+              << " | " << t.p99_ms << " | " << t.max_ms << " | " << std::setprecision(1)
+              << 100.0 * t.mean_ms / whole.mean_ms << " % |\n";
+  };
+  for (size_t s = 0; s < so::kPathStages; ++s) row(so::toString(static_cast<so::PathStage>(s)), stage_ms[s]);
+  row("outside the stages", outside_ms);
+  row("**whole path**", whole_ms);
+  std::cout << std::endl;
+  return fused == images.size() ? 0 : 1;
+}
+
 const char* kStages =
     "line, line_pyramid, raytrace, raytrace_pyramid, line_pyramid_bounded, raytrace_pyramid_bounded, default, blur, "
     "encode, fusion, octomap";
@@ -129,7 +201,7 @@ int run(int argc, char** argv) {
   std::string only, scenario_name, flight;
   long frame = 0, pace_ms = 0;
   int threads = 1;
-  bool spans = true;
+  bool spans = true, stages = false;
   std::map<std::string, double> model_values;  // the default stage's sensor model, by name
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -149,13 +221,16 @@ int run(int argc, char** argv) {
       threads = static_cast<int>(so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 1, 64));
     } else if (a == "--no-spans") {
       spans = false;
+    } else if (a == "--stages") {
+      stages = true;
     } else if (a == "--model") {
       so::tools::addNameValue(argc, argv, &i, &model_values);
     } else if (a == "--frame") {
       frame = so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 0, 1000000);
     } else if (a == "--help") {
       std::cout << "usage: performance [--repeat N] [--only STAGE] [--scenario NAME [--frame K]] | --flight NAME "
-                   "[--pace-ms MS]; either with [--threads N]; [--model NAME=VALUE]... [--no-spans]\n"
+                   "[--pace-ms MS]; either with [--threads N]; [--model NAME=VALUE]... [--no-spans] | --stages "
+                   "(--scenario NAME [--frame K] | --flight NAME) [--threads N]\n"
                    "Times the mapper's stages on the Table I frame (or frame K of a simulated flight, with its "
                    "stereo effects, seed 1) at 0.25 m (median and min-max of N runs, default 21) and OctoMap's "
                    "insertPointCloud on the same frame.\n"
@@ -166,6 +241,9 @@ int run(int argc, char** argv) {
                    "--model NAME=VALUE: a sensor model parameter of the default stage and of the flight's "
                    "line_pyramid_bounded row (e.g. gap_guard_cells=1), repeatable.\n"
                    "--no-spans: the default descends into the blocks it draws as spans (the form before them).\n"
+                   "--stages: the whole path as the nodelets run it (FrameMapping, MapFusion, the defaults), "
+                   "image in to map fused, stage by stage, on frame K repeated N times or on every frame of the "
+                   "flight.\n"
                    "STAGE: "
                 << kStages << "\n";
       return 0;
@@ -174,6 +252,24 @@ int run(int argc, char** argv) {
     }
   }
   if (pace_ms > 0 && flight.empty()) throw so::tools::UsageError("--pace-ms needs --flight");
+  if (stages) {
+    if (flight.empty() == scenario_name.empty())
+      throw so::tools::UsageError("--stages needs --scenario NAME or --flight NAME");
+    if (!flight.empty()) {
+      const so::FlightScenario scenario = so::tools::scenarioNamed(flight);
+      std::vector<size_t> frames(scenario.T_W_B.size());
+      for (size_t k = 0; k < frames.size(); ++k) frames[k] = k;
+      return wholePath(scenario, frames, "Flight '" + flight + "', " + std::to_string(frames.size()) + " frames",
+                       threads);
+    }
+    const so::FlightScenario scenario = so::tools::scenarioNamed(scenario_name);
+    if (frame >= static_cast<long>(scenario.T_W_B.size()))
+      throw so::tools::UsageError("--frame: the flight has " + std::to_string(scenario.T_W_B.size()) + " frames");
+    return wholePath(
+        scenario, std::vector<size_t>(static_cast<size_t>(repeat), static_cast<size_t>(frame)),
+        "Frame " + std::to_string(frame) + " of flight '" + scenario_name + "', " + std::to_string(repeat) + " times",
+        threads);
+  }
   {  // a wrong --model before any stage runs
     so::DrawingConfig checked = so::DrawingConfig::mapperDefaults();
     so::tools::applyModelValues(model_values, &checked);

@@ -23,6 +23,7 @@
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/map_accumulator.h"
 #include "stereo_occupancy/ros/parameters.h"
+#include "stereo_occupancy/stage_times.h"
 #include "stereo_occupancy/store/mission_map.h"
 
 namespace stereo_occupancy {
@@ -87,12 +88,16 @@ class FrameMapping {
   const FrameCounters& counters() const { return counters_; }
   /// Why the current camera set-up cannot be mapped; empty if it can.
   const std::string& refusedSetup() const { return refused_setup_; }
+  /// From now on adds each stage's time (input, the drawer's stages,
+  /// encoding, message) to @p times; null: no timing (the default).
+  void setStageTimes(StageTimes* times);
 
  private:
-  /// The common path once the image is a CV_32FC1 disparity of @p camera.
+  /// The common path once the image is a CV_32FC1 disparity of @p camera;
+  /// stops @p input (the input stage's timer) where the drawing begins.
   OccupancyUpdatePtr mapDisparity(const cv::Mat& disparity, const std_msgs::Header& header,
                                   const StereoCameraConfig& camera, const tf2::BufferCore& tf, const ros::Time& now,
-                                  FrameResult* result);
+                                  FrameResult* result, StageTimer* input);
   /// A drawer for @p camera, built when the camera or the parameters changed;
   /// null, with why in @p result, if the set-up is refused.
   DisparityDrawer* drawerFor(const StereoCameraConfig& camera, FrameResult* result);
@@ -108,6 +113,7 @@ class FrameMapping {
   cv::Mat depth_disparity_;                ///< the depth path's disparity image, reused
   size_t last_cells_ = 0, last_runs_ = 0;  ///< the last update's sizes: the next one's arrays reserve as much
   FrameCounters counters_;
+  StageTimes* stage_times_ = nullptr;  ///< setStageTimes()
 };
 
 /// Updates received by MapFusion and what became of them.
@@ -163,6 +169,8 @@ class MapFusion {
   /// The stamp of the last fused update.
   const ros::Time& lastStamp() const { return last_stamp_; }
   const FusionCounters& counters() const { return counters_; }
+  /// From now on adds the fusion's and the maintenance's time to @p times; null: no timing (the default).
+  void setStageTimes(StageTimes* times) { stage_times_ = times; }
 
  private:
   bool refuse(const std::string& text, std::string* why);
@@ -174,6 +182,7 @@ class MapFusion {
   ros::Time last_stamp_;
   ros::Time last_prune_;  ///< stamp of the update at the last prune
   FusionCounters counters_;
+  StageTimes* stage_times_ = nullptr;              ///< setStageTimes()
   std::map<std::string, uint64_t> last_sequence_;  ///< per publisher and source
 };
 
