@@ -8,9 +8,6 @@
 // valgrind --tool=callgrind).
 
 #include <octomap/octomap.h>
-#include <ros/time.h>
-#include <stereo_msgs/DisparityImage.h>
-#include <tf2/buffer_core.h>
 
 #include <algorithm>
 #include <chrono>
@@ -28,13 +25,12 @@
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
-#include "stereo_occupancy/ros/input_conversions.h"
-#include "stereo_occupancy/ros/mapping_pipeline.h"
 #include "stereo_occupancy/sim/flight_simulation.h"
 #include "stereo_occupancy/sim/synthetic_scene.h"
 #include "stereo_occupancy/stage_times.h"
 #include "stereo_occupancy/time_statistics.h"
 #include "tool_support.h"
+#include "whole_path.h"
 
 namespace so = stereo_occupancy;
 
@@ -126,48 +122,22 @@ int flightPath(const std::string& scenario_name, long pace_ms, int threads, bool
   return 0;
 }
 
-/// The whole path as the nodelets run it, image in to map fused: a
-/// DisparityImage message and its pose on tf into FrameMapping, its update
-/// into MapFusion, with the nodelets' defaults on @p threads threads, stage
-/// by stage (stage_times.h), frame @p frames[k] of @p scenario for each k.
-/// The messages are made beforehand (a camera driver's work).
+/// The whole path as the nodelets run it, image in to map fused
+/// (WholePath), stage by stage (stage_times.h), frame @p frames[k] of
+/// @p scenario for each k. The messages are made beforehand (a camera
+/// driver's work).
 int wholePath(const so::FlightScenario& scenario, const std::vector<size_t>& frames, const std::string& title,
               int threads) {
-  so::DisparityMapperParameters mapper;
-  mapper.drawing.threads = threads;
-  so::OctomapAccumulatorParameters accumulator;
-  accumulator.map.threads = threads;
-  accumulator.map.resolution_m = mapper.drawing.resolution_m;
-  so::FrameMapping mapping(mapper);
-  so::MapFusion fusion(accumulator);
-  so::StageTimes times;
-  mapping.setStageTimes(&times);
-  fusion.setStageTimes(&times);
-  tf2::BufferCore tf(ros::Duration(1e6));  // every pose of the run
+  so::tools::WholePath path(threads);
   std::vector<stereo_msgs::DisparityImageConstPtr> images;
-  const ros::Time start(1000.0);
-  for (size_t k = 0; k < frames.size(); ++k) {
-    const ros::Time stamp = start + ros::Duration(0.1 * static_cast<double>(k));
-    tf.setTransform(so::toTransformMsg(scenario.T_W_B[frames[k]], stamp, "map", "base_link"), "performance");
-    tf.setTransform(so::toTransformMsg(scenario.T_B_C, stamp, "base_link", "camera_optical"), "performance");
-    std_msgs::Header header;
-    header.stamp = stamp;
-    header.frame_id = "camera_optical";
-    auto msg = boost::make_shared<stereo_msgs::DisparityImage>();
-    so::toDisparityImageMsg(so::renderStereoFrame(scenario, frames[k], 1), header, scenario.camera,
-                            scenario.effects.max_search_disparity_px, scenario.effects.subpixel_step_px, msg.get());
-    images.push_back(msg);
-  }
+  for (size_t k = 0; k < frames.size(); ++k) images.push_back(path.prepare(scenario, frames[k], k));
   std::vector<std::vector<double>> stage_ms(so::kPathStages);
   std::vector<double> whole_ms, outside_ms;
   size_t fused = 0;
   for (const auto& image : images) {
-    times = so::StageTimes();
-    so::FrameResult result;
-    std::string why;
+    so::StageTimes times;
     const auto t0 = Clock::now();
-    const so::OccupancyUpdatePtr update = mapping.map(image, nullptr, tf, image->header.stamp, &result);
-    if (update && fusion.fuse(*update, &why)) ++fused;
+    fused += path.run(image, &times);
     const double whole = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
     whole_ms.push_back(whole);
     outside_ms.push_back(whole - times.total());
@@ -175,8 +145,8 @@ int wholePath(const so::FlightScenario& scenario, const std::vector<size_t>& fra
   }
   const so::TimeStatistics whole = so::TimeStatistics::of(whole_ms);
   std::cout << title << ": the whole path as the nodelets run it (FrameMapping, MapFusion; the defaults: "
-            << so::toString(mapper.drawing.algorithm) << ", " << mapper.drawing.resolution_m << " m cells), "
-            << threadsText(threads) << "; " << fused << " of " << images.size()
+            << so::toString(path.mapper().drawing.algorithm) << ", " << path.mapper().drawing.resolution_m
+            << " m cells), " << threadsText(threads) << "; " << fused << " of " << images.size()
             << " images fused. Per frame [ms]; share: of the mean whole path.\n\n"
                "| stage | mean | median | p99 | max | share |\n|---|---:|---:|---:|---:|---:|\n";
   auto row = [&](const std::string& name, const std::vector<double>& ms) {
@@ -399,20 +369,7 @@ int run(int argc, char** argv) {
   }
 
   if (wanted("octomap")) {
-    // The same frame as a point cloud: every matched pixel's point; the
-    // sky (zero disparity) as a point beyond the range, whose ray OctoMap
-    // draws free up to the range.
-    const so::StereoCameraModel model(camera);
-    octomap::Pointcloud cloud;
-    for (int y = 0; y < image.rows; ++y)
-      for (int x = 0; x < image.cols; ++x) {
-        const float d = image.at<float>(y, x);
-        if (!(d >= 0.0f)) continue;
-        const Eigen::Vector3d C_p = d > 0.0f ? model.pointFromDisparity(x, y, d)
-                                             : Eigen::Vector3d(model.rayThroughPixel(x, y) * 2.0 * camera.max_range_m);
-        const Eigen::Vector3d W_p = T_W_C * C_p;
-        cloud.push_back(static_cast<float>(W_p.x()), static_cast<float>(W_p.y()), static_cast<float>(W_p.z()));
-      }
+    const octomap::Pointcloud cloud = so::tools::disparityCloud(image, camera, T_W_C);
     const Eigen::Vector3d o = T_W_C.translation();
     std::unique_ptr<octomap::OcTree> tree;
     const Timing t = timeIt(

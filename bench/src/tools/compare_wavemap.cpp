@@ -1,0 +1,122 @@
+// compare_wavemap: the whole path against its peers on the same frames, one
+// thread each, side by side in one run (issue 48): the nodelets' path
+// (WholePath: a DisparityImage in, the map fused), wavemap's projective
+// integrator into its hashed chunked wavelet octree (the same frame as a
+// depth image), and OctoMap's insertPointCloud (as a point cloud), each
+// into its own map of the flight. Built only where CMake finds wavemap.
+// A benchmark: it prints figures and asserts nothing.
+
+#include <octomap/octomap.h>
+
+#include <algorithm>
+#include <chrono>
+#include <iomanip>
+#include <iostream>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "scenario_support.h"
+#include "stereo_occupancy/sim/flight_simulation.h"
+#include "stereo_occupancy/sim/wavemap_integrator.h"
+#include "stereo_occupancy/time_statistics.h"
+#include "tool_support.h"
+#include "whole_path.h"
+
+namespace so = stereo_occupancy;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+/// Per frame of one flight [ms], and the peers' time over ours.
+struct FlightTimes {
+  std::vector<double> ours, wavemap, octomap, wavemap_ratio, octomap_ratio;
+};
+
+FlightTimes timeFlight(const so::FlightScenario& scenario) {
+  so::tools::WholePath ours(1);
+  so::WavemapIntegrator wavemap(scenario.camera, ours.mapper().drawing.resolution_m, 1);
+  octomap::OcTree octree(ours.mapper().drawing.resolution_m);
+  FlightTimes t;
+  for (size_t i = 0; i < scenario.T_W_B.size(); ++i) {
+    // Each method's input as its users hand it over (untimed): the message
+    // with its pose on tf, a depth image, a point cloud in the world.
+    const stereo_msgs::DisparityImageConstPtr image = ours.prepare(scenario, i, i);
+    const cv::Mat disparity = so::renderStereoFrame(scenario, i, 1);
+    const Eigen::Isometry3d T_W_C = scenario.cameraPose(i);
+    const cv::Mat depth = so::tools::depthFromDisparity(disparity, scenario.camera);
+    const octomap::Pointcloud cloud = so::tools::disparityCloud(disparity, scenario.camera, T_W_C);
+    const octomap::point3d origin(static_cast<float>(T_W_C.translation().x()),
+                                  static_cast<float>(T_W_C.translation().y()),
+                                  static_cast<float>(T_W_C.translation().z()));
+
+    auto t0 = Clock::now();
+    if (!ours.run(image, nullptr)) throw std::runtime_error("frame " + std::to_string(i) + " was not mapped");
+    t.ours.push_back(msSince(t0));
+    t0 = Clock::now();
+    wavemap.integrate(depth, T_W_C);
+    t.wavemap.push_back(msSince(t0));
+    t0 = Clock::now();
+    octree.insertPointCloud(cloud, origin, scenario.camera.max_range_m, /*lazy_eval=*/false, /*discretize=*/true);
+    t.octomap.push_back(msSince(t0));
+    t.wavemap_ratio.push_back(t.wavemap.back() / t.ours.back());
+    t.octomap_ratio.push_back(t.octomap.back() / t.ours.back());
+  }
+  return t;
+}
+
+std::string medianMax(const std::vector<double>& ms) {
+  const so::TimeStatistics t = so::TimeStatistics::of(ms);
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(2) << t.median_ms << " / " << t.max_ms;
+  return s.str();
+}
+
+std::string minMedian(const std::vector<double>& ratio) {
+  const so::TimeStatistics t = so::TimeStatistics::of(ratio);
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(1) << t.min_ms << "× / " << t.median_ms << "×";
+  return s.str();
+}
+
+int run(int argc, char** argv) {
+  std::vector<std::string> flights;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--flight") {
+      flights.push_back(so::tools::nextValue(argc, argv, &i));
+    } else if (a == "--help") {
+      std::cout << "usage: compare_wavemap [--flight NAME]...\n"
+                   "Times, per frame, one thread each: the nodelets' whole path (image in to map fused), "
+                   "wavemap's projective integrator and OctoMap's insertPointCloud, each into its own map of "
+                   "the flight (default: every flight).\n";
+      return 0;
+    } else {
+      throw so::tools::UsageError("unknown option '" + a + "'");
+    }
+  }
+  if (flights.empty()) flights = so::scenarioNames();
+  std::cout << "Per frame, one thread each, 0.25 m cells, 25 m range [ms: median / max]; the peers' time over "
+               "ours per frame [min / median].\n\n"
+               "| flight | frames | ours | wavemap | OctoMap | wavemap / ours | OctoMap / ours |\n"
+               "|---|---:|---:|---:|---:|---:|---:|\n";
+  for (const std::string& name : flights) {
+    const so::FlightScenario scenario = so::tools::scenarioNamed(name);
+    const FlightTimes t = timeFlight(scenario);
+    std::cout << "| " << name << " | " << t.ours.size() << " | " << medianMax(t.ours) << " | " << medianMax(t.wavemap)
+              << " | " << medianMax(t.octomap) << " | " << minMedian(t.wavemap_ratio) << " | "
+              << minMedian(t.octomap_ratio) << " |" << std::endl;
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return so::tools::runTool("compare_wavemap", [&] { return run(argc, argv); });
+}
