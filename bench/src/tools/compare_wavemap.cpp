@@ -1,5 +1,5 @@
 // compare_wavemap: the whole path against its peers on the same frames, one
-// thread each, side by side in one run (issue 48): the nodelets' path
+// thread each, one after the other in one run (issue 48): the nodelets' path
 // (WholePath: a DisparityImage in, the map fused), wavemap's projective
 // integrator into its hashed chunked wavelet octree (the same frame as a
 // depth image), and OctoMap's insertPointCloud (as a point cloud), each
@@ -38,34 +38,48 @@ struct FlightTimes {
   std::vector<double> ours, wavemap, octomap, wavemap_ratio, octomap_ratio;
 };
 
+/// Each method over the whole flight in turn, into its own map, from inputs
+/// made beforehand: interleaved frame by frame, each would evict the
+/// others' maps from the caches (OctoMap's most), which costs the nodelets'
+/// path half its time again on this VM.
 FlightTimes timeFlight(const so::FlightScenario& scenario) {
   so::tools::WholePath ours(1);
-  so::WavemapIntegrator wavemap(scenario.camera, ours.mapper().drawing.resolution_m, 1);
-  octomap::OcTree octree(ours.mapper().drawing.resolution_m);
-  FlightTimes t;
+  const double cell_m = ours.mapper().drawing.resolution_m;
+  // Each method's input as its users hand it over (untimed): the message
+  // with its pose on tf, a depth image, a point cloud in the world.
+  std::vector<stereo_msgs::DisparityImageConstPtr> images;
+  std::vector<cv::Mat> depths;
+  std::vector<octomap::Pointcloud> clouds;
   for (size_t i = 0; i < scenario.T_W_B.size(); ++i) {
-    // Each method's input as its users hand it over (untimed): the message
-    // with its pose on tf, a depth image, a point cloud in the world.
-    const stereo_msgs::DisparityImageConstPtr image = ours.prepare(scenario, i, i);
+    images.push_back(ours.prepare(scenario, i, i));
     const cv::Mat disparity = so::renderStereoFrame(scenario, i, 1);
-    const Eigen::Isometry3d T_W_C = scenario.cameraPose(i);
-    const cv::Mat depth = so::tools::depthFromDisparity(disparity, scenario.camera);
-    const octomap::Pointcloud cloud = so::tools::disparityCloud(disparity, scenario.camera, T_W_C);
-    const octomap::point3d origin(static_cast<float>(T_W_C.translation().x()),
-                                  static_cast<float>(T_W_C.translation().y()),
-                                  static_cast<float>(T_W_C.translation().z()));
-
-    auto t0 = Clock::now();
-    if (!ours.run(image, nullptr)) throw std::runtime_error("frame " + std::to_string(i) + " was not mapped");
+    depths.push_back(so::tools::depthFromDisparity(disparity, scenario.camera));
+    clouds.push_back(so::tools::disparityCloud(disparity, scenario.camera, scenario.cameraPose(i)));
+  }
+  FlightTimes t;
+  for (size_t i = 0; i < images.size(); ++i) {
+    const auto t0 = Clock::now();
+    if (!ours.run(images[i], nullptr)) throw std::runtime_error("frame " + std::to_string(i) + " was not mapped");
     t.ours.push_back(msSince(t0));
-    t0 = Clock::now();
-    wavemap.integrate(depth, T_W_C);
+  }
+  so::WavemapIntegrator wavemap(scenario.camera, cell_m, 1);
+  for (size_t i = 0; i < depths.size(); ++i) {
+    const auto t0 = Clock::now();
+    wavemap.integrate(depths[i], scenario.cameraPose(i));
     t.wavemap.push_back(msSince(t0));
-    t0 = Clock::now();
-    octree.insertPointCloud(cloud, origin, scenario.camera.max_range_m, /*lazy_eval=*/false, /*discretize=*/true);
+  }
+  octomap::OcTree octree(cell_m);
+  for (size_t i = 0; i < clouds.size(); ++i) {
+    const Eigen::Vector3d o = scenario.cameraPose(i).translation();
+    const auto t0 = Clock::now();
+    octree.insertPointCloud(
+        clouds[i], octomap::point3d(static_cast<float>(o.x()), static_cast<float>(o.y()), static_cast<float>(o.z())),
+        scenario.camera.max_range_m, /*lazy_eval=*/false, /*discretize=*/true);
     t.octomap.push_back(msSince(t0));
-    t.wavemap_ratio.push_back(t.wavemap.back() / t.ours.back());
-    t.octomap_ratio.push_back(t.octomap.back() / t.ours.back());
+  }
+  for (size_t i = 0; i < t.ours.size(); ++i) {
+    t.wavemap_ratio.push_back(t.wavemap[i] / t.ours[i]);
+    t.octomap_ratio.push_back(t.octomap[i] / t.ours[i]);
   }
   return t;
 }
@@ -94,7 +108,7 @@ int run(int argc, char** argv) {
       std::cout << "usage: compare_wavemap [--flight NAME]...\n"
                    "Times, per frame, one thread each: the nodelets' whole path (image in to map fused), "
                    "wavemap's projective integrator and OctoMap's insertPointCloud, each into its own map of "
-                   "the flight (default: every flight).\n";
+                   "the flight (default: every flight), one method after the other.\n";
       return 0;
     } else {
       throw so::tools::UsageError("unknown option '" + a + "'");
