@@ -10,6 +10,7 @@
 #include <memory>
 #include <vector>
 
+#include "stereo_occupancy/cell_class.h"
 #include "stereo_occupancy/worker_pool.h"
 
 namespace stereo_occupancy {
@@ -25,6 +26,14 @@ inline bool leafOverlaps(const octomap::OcTree::leaf_bbx_iterator& it, unsigned 
     if (first[a] + side - 1 < lo[a] || first[a] > hi[a]) return false;
   return true;
 }
+
+/// The class changes of fusions (AccumulatingOcTree::LeafUpdater::recordClassChanges()).
+struct ClassChangeLog {
+  std::vector<CellClassChange> changes;                  ///< in the order of the fusions
+  std::vector<std::vector<CellClassChange>> per_worker;  ///< addSiblingsInParts()'s workers' (kept for their memory)
+  size_t max_changes = 0;                                ///< changes holds at most this many
+  bool overflowed = false;                               ///< a change did not fit: changes is incomplete
+};
 
 /// An OcTree with two additions the accumulator needs: adding log-odds to
 /// many leaves in a row without descending from the root for each, and
@@ -54,6 +63,18 @@ class AccumulatingOcTree : public octomap::OcTree {
       path_[static_cast<size_t>(depth)] = subtree;
     }
     void add(const octomap::OcTreeKey& key, float log_odds);
+    /// From now on, appends each cell whose class (unknown, free, occupied
+    /// by @p occupied_log_odds) an add() changes to @p changes, with its class
+    /// after the add (a created leaf was unknown, an expanded pruned leaf's
+    /// cells had its class); at most @p max_changes, then only sets
+    /// overflowed(). Null: no recording (the fusion as without it).
+    void recordClassChanges(std::vector<CellClassChange>* changes, float occupied_log_odds, size_t max_changes) {
+      changes_ = changes;
+      occupied_log_odds_ = occupied_log_odds;
+      max_changes_ = max_changes;
+    }
+    /// A change was not recorded because @p changes held max_changes.
+    bool overflowed() const { return overflowed_; }
     /// add() for each of a node's eight leaves that has a value, in child
     /// order: leaf i has the key @p first + (i & 1, (i >> 1) & 1, i >> 2)
     /// (@p first's components even) and the log-odds values[i], NaN for none.
@@ -63,13 +84,19 @@ class AccumulatingOcTree : public octomap::OcTree {
     /// add()'s walk from the node at @p depth on the previous key's path
     /// (a common ancestor of the two keys); @p created: that node is new.
     void descend(const octomap::OcTreeKey& key, float log_odds, int depth, bool created);
+    /// descend()'s log-odds update of the leaf @p node of @p key, recording its class change.
+    void updateRecording(const octomap::OcTreeKey& key, octomap::OcTreeNode* node, float log_odds, bool created);
 
     AccumulatingOcTree* tree_;
     std::array<octomap::OcTreeNode*, 17> path_{};  ///< path_[d]: the previous key's node at depth d
     int floor_depth_ = 0;                          ///< the walks start at this depth or below
     int known_depth_ = -1;                         ///< path_[floor_depth_ .. known_depth_] is valid
     octomap::OcTreeKey previous_;
-    bool next_created_ = false;  ///< the next add()'s first node is new (a worker's subtree)
+    bool next_created_ = false;                        ///< the next add()'s first node is new (a worker's subtree)
+    std::vector<CellClassChange>* changes_ = nullptr;  ///< null: not recording
+    float occupied_log_odds_ = 0.0f;
+    size_t max_changes_ = 0;
+    bool overflowed_ = false;
   };
 
   /// One sibling block of an update: addSiblings()'s arguments.
@@ -82,14 +109,17 @@ class AccumulatingOcTree : public octomap::OcTree {
   static constexpr int kPartDepth = 12;
   /// Trees that count the nodes each worker creates (LeafUpdater's counter).
   using WorkerCounters = std::vector<std::unique_ptr<AccumulatingOcTree>>;
+
   /// addSiblings() for every block of @p parts[0 .. num_parts), each part the
   /// blocks of one subtree at kPartDepth, on @p pool's workers. The path to
   /// each subtree is made first on this thread, as the first update below it
   /// would make it; the parts below a pruned leaf above kPartDepth (whether
   /// it is expanded depends on their values) go on this thread after the
   /// others. The tree is the same, bit for bit, as addSiblings() on one thread.
+  /// @p log (null: none) gets the class changes: each worker's, in worker
+  /// order, then this thread's (the same set as on one thread; another order).
   void addSiblingsInParts(const std::vector<std::vector<SiblingBlock>>& parts, size_t num_parts, WorkerPool* pool,
-                          WorkerCounters* counters);
+                          WorkerCounters* counters, ClassChangeLog* log = nullptr);
 
   /// Sets the leaf of @p key at @p depth (pruned leaves keep their size).
   /// octomap 1.9's deleteNode leaves the emptied inner nodes' child arrays
@@ -177,7 +207,26 @@ inline void AccumulatingOcTree::LeafUpdater::descend(const octomap::OcTreeKey& k
   }
   known_depth_ = leaf_depth;
   if (!created && saturated(node)) return;
+  if (changes_) {  // the only cost of recording when it is off
+    updateRecording(key, node, log_odds, created);
+    return;
+  }
   t.updateNodeLogOdds(node, log_odds);
+}
+
+inline void AccumulatingOcTree::LeafUpdater::updateRecording(const octomap::OcTreeKey& key, octomap::OcTreeNode* node,
+                                                             float log_odds, bool created) {
+  // A created leaf was unknown; an expanded pruned leaf's cell holds its value already.
+  const CellClass before = created ? CellClass::kUnknown : classOfLogOdds(node->getLogOdds(), occupied_log_odds_);
+  tree_->updateNodeLogOdds(node, log_odds);
+  const CellClass after = classOfLogOdds(node->getLogOdds(), occupied_log_odds_);
+  if (after == before) return;
+  if (changes_->size() >= max_changes_) {
+    overflowed_ = true;
+    return;
+  }
+  const int offset = static_cast<int>(tree_->tree_max_val);  // key of global index 0
+  changes_->push_back(CellClassChange{Eigen::Vector3i(key[0] - offset, key[1] - offset, key[2] - offset), after});
 }
 
 inline void AccumulatingOcTree::LeafUpdater::addSiblings(const octomap::OcTreeKey& first, const float (&values)[8]) {

@@ -10,29 +10,17 @@
 #include <octomap/OcTree.h>
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>  // AlignedBox3d
 
 #include <cstddef>
 #include <cstdint>
 #include <string>
 #include <vector>
 
+#include "stereo_occupancy/cell_class.h"  // CellClass, CellClassChange
 #include "stereo_occupancy/parameter_table.h"
 
 namespace stereo_occupancy {
-
-/// What a cell of the map is, as the field sees it.
-enum class CellClass : uint8_t {
-  kUnknown = 0,   ///< no node in the map
-  kFree = 1,      ///< log-odds at or below the map's occupancy threshold
-  kOccupied = 2,  ///< log-odds above it
-};
-
-/// A cell whose class an update changed. @p cell is the global cell index:
-/// the OctoMap key minus 32768 on each axis (floor(p / resolution)).
-struct CellClassChange {
-  Eigen::Vector3i cell;
-  CellClass now = CellClass::kUnknown;
-};
 
 /// Parameters of the distance field.
 struct DistanceFieldConfig {

@@ -13,12 +13,14 @@
 #include <unordered_set>
 #include <vector>
 
+#include "stereo_occupancy/cell_class.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/parameter_table.h"
 
 namespace stereo_occupancy {
 
 class AccumulatingOcTree;
+struct ClassChangeLog;
 
 /// Parameters of the global map.
 struct MapAccumulatorConfig {
@@ -132,6 +134,26 @@ class MapAccumulator {
   /// The next takeChangedBlocks() returns all blocks (a new subscriber wants the whole map).
   void markAllChanged() { all_changed_ = true; }
 
+  /// Starts (@p on) or stops recording the cells whose class (unknown, free,
+  /// occupied: cell_class.h) each integrate() changes, for the distance field
+  /// (distance_field.h): the fusion compares each cell's class before and
+  /// after its log-odds add, on its own threads. Off, the fusion costs what it
+  /// did without it. Starting makes the next takeClassChanges() say all.
+  void recordClassChanges(bool on);
+  /// The cells whose class the integrate() calls since the last call changed,
+  /// each with its class after the update that changed it, in the order of
+  /// the updates (a cell two updates changed comes twice, the later last;
+  /// within one update a cell comes once, in an order that depends on the
+  /// threads). @p all is set true instead, and the list is empty, after
+  /// anything else that changed cells (reset, load, clearBox, a prune() that
+  /// dropped leaves, dropTile, insertLeaves), when recording started, or
+  /// when more than kMaxClassChanges piled up: the caller then reads the map
+  /// again. Empty with @p all false when not recording.
+  std::vector<CellClassChange> takeClassChanges(bool* all);
+  /// Most class changes kept between two takeClassChanges() (16 bytes each);
+  /// beyond, they give way to all.
+  static constexpr size_t kMaxClassChanges = size_t{1} << 21;
+
   /// Tiles: the octree's nodes at depth kTileDepth, kTileCells cells on an
   /// edge (64 m at 0.25 m). A mission keeps the tiles it flew away from on
   /// disk (store/mission_map.h); the accumulator only hands them over.
@@ -202,6 +224,13 @@ class MapAccumulator {
   bool all_dirty_ = false;                       ///< every tile changed (load)
   bool all_changed_ = true;                      ///< the whole map changed (reset, load)
   std::unique_ptr<Fusion> fusion_;               ///< null: fusion on the calling thread
+  /// Recording class changes: the changes since the last take; null: not recording.
+  std::unique_ptr<ClassChangeLog> class_log_;
+  bool classes_all_ = false;  ///< recording, and the map changed otherwise than by integrate()
+  /// The map changed otherwise than by integrate(): the class changes give way to all.
+  void classesChangedEverywhere();
+  /// The log the fusion records into; null when not recording, or when all is due anyway.
+  ClassChangeLog* recordingLog() { return classes_all_ ? nullptr : class_log_.get(); }
 };
 
 }  // namespace stereo_occupancy

@@ -95,7 +95,7 @@ octomap::OcTreeNode* AccumulatingOcTree::partRoot(const octomap::OcTreeKey& key,
 }
 
 void AccumulatingOcTree::addSiblingsInParts(const std::vector<std::vector<SiblingBlock>>& parts, size_t num_parts,
-                                            WorkerPool* pool, WorkerCounters* counters) {
+                                            WorkerPool* pool, WorkerCounters* counters, ClassChangeLog* log) {
   struct Start {
     octomap::OcTreeNode* node;
     bool created;
@@ -112,11 +112,27 @@ void AccumulatingOcTree::addSiblingsInParts(const std::vector<std::vector<Siblin
     c->clamping_thres_max = clamping_thres_max;
     c->tree_size = 0;
   }
+  if (log) {
+    log->per_worker.resize(pool->size());
+    for (auto& w : log->per_worker) w.clear();  // keeps their memory
+  }
+  // Each worker appends to its own list, each at most what the log may still
+  // take; the lists follow the log's in worker order afterwards.
+  std::vector<char> overflowed(log ? pool->size() : 0, 0);
+  auto record = [&](LeafUpdater* updater, std::vector<CellClassChange>* changes) {
+    if (log) updater->recordClassChanges(changes, occ_prob_thres_log, log->max_changes - log->changes.size());
+  };
   auto countNodes = [&] {  // the nodes the workers created are this tree's
     for (const auto& c : *counters) {
       size_changed = size_changed || c->tree_size > 0;
       tree_size += c->tree_size;
       c->tree_size = 0;
+    }
+    if (!log) return;
+    for (size_t w = 0; w < log->per_worker.size(); ++w) {
+      const auto& changes = log->per_worker[w];
+      log->overflowed = log->overflowed || overflowed[w] || log->changes.size() + changes.size() > log->max_changes;
+      if (!log->overflowed) log->changes.insert(log->changes.end(), changes.begin(), changes.end());
     }
   };
   try {
@@ -124,7 +140,9 @@ void AccumulatingOcTree::addSiblingsInParts(const std::vector<std::vector<Siblin
       const size_t p = on_workers[i];
       LeafUpdater updater((*counters)[worker].get(), starts[p].node, kPartDepth, parts[p].front().first,
                           starts[p].created);
+      record(&updater, log ? &log->per_worker[worker] : nullptr);
       for (const SiblingBlock& b : parts[p]) updater.addSiblings(b.first, b.values);
+      if (updater.overflowed()) overflowed[worker] = 1;
     });
   } catch (...) {
     countNodes();
@@ -132,8 +150,10 @@ void AccumulatingOcTree::addSiblingsInParts(const std::vector<std::vector<Siblin
   }
   countNodes();
   LeafUpdater updater(this);
+  if (log && !log->overflowed) record(&updater, &log->changes);
   for (size_t p : here)
     for (const SiblingBlock& b : parts[p]) updater.addSiblings(b.first, b.values);
+  if (log && updater.overflowed()) log->overflowed = true;
 }
 
 }  // namespace stereo_occupancy

@@ -122,7 +122,38 @@ std::vector<MapAccumulator::BlockIndex> MapAccumulator::takeChangedBlocks(bool* 
   return blocks;
 }
 
+void MapAccumulator::recordClassChanges(bool on) {
+  if (!on) {
+    class_log_.reset();
+    classes_all_ = false;
+    return;
+  }
+  if (class_log_) return;
+  class_log_ = std::make_unique<ClassChangeLog>();
+  class_log_->max_changes = kMaxClassChanges;
+  classes_all_ = true;  // the caller has seen nothing yet
+}
+
+std::vector<CellClassChange> MapAccumulator::takeClassChanges(bool* all) {
+  std::vector<CellClassChange> changes;
+  *all = false;
+  if (!class_log_) return changes;
+  *all = classes_all_;
+  if (!classes_all_) changes.swap(class_log_->changes);
+  class_log_->changes.clear();
+  classes_all_ = false;
+  return changes;
+}
+
+void MapAccumulator::classesChangedEverywhere() {
+  if (!class_log_) return;
+  classes_all_ = true;
+  class_log_->changes.clear();
+  class_log_->overflowed = false;
+}
+
 void MapAccumulator::reset() {
+  classesChangedEverywhere();
   all_changed_ = true;
   changed_blocks_.clear();
   all_dirty_ = false;
@@ -158,6 +189,7 @@ void MapAccumulator::load(const std::string& path) {
   tree_ = std::move(loaded);
   applyThresholds();
   all_dirty_ = true;
+  classesChangedEverywhere();
 }
 
 size_t MapAccumulator::clearBox(const Eigen::Vector3d& W_min, const Eigen::Vector3d& W_max) {
@@ -203,6 +235,7 @@ size_t MapAccumulator::clearBox(const Eigen::Vector3d& W_min, const Eigen::Vecto
     dirty_tiles_.insert(packedTileOf(b));
   }
   inner_stale_ = inner_stale_ || !cells.empty();
+  if (!cells.empty()) classesChangedEverywhere();
   return cells.size();
 }
 
@@ -243,6 +276,7 @@ bool MapAccumulator::integrate(const GridUpdateView& update, std::string* why) {
     fuseInParts(update);
   else
     fuseInOrder(update);
+  if (class_log_ && class_log_->overflowed) classesChangedEverywhere();  // too many to keep
   inner_stale_ = true;
   if (W_recent_origins_.size() < kPruneOrigins) {
     W_recent_origins_.push_back(update.W_sensor_origin);
@@ -265,6 +299,9 @@ void MapAccumulator::fuseInOrder(const GridUpdateView& update) {
   // is about a third faster than the storage order (docs/performance.md).
   // admits() put every block inside the key range.
   AccumulatingOcTree::LeafUpdater updater(tree_.get());
+  ClassChangeLog* log = recordingLog();
+  if (log)
+    updater.recordClassChanges(&log->changes, tree_->getOccupancyThresLog(), log->max_changes - log->changes.size());
   // Consecutive sibling blocks mostly lie in the same change-tracking block:
   // the set is asked only when the block differs from the last one.
   uint64_t last_block = ~uint64_t{0};
@@ -281,6 +318,7 @@ void MapAccumulator::fuseInOrder(const GridUpdateView& update) {
       last_block = block;
     }
   });
+  if (log && updater.overflowed()) log->overflowed = true;
 }
 
 void MapAccumulator::fuseInParts(const GridUpdateView& update) {
@@ -314,7 +352,7 @@ void MapAccumulator::fuseInParts(const GridUpdateView& update) {
     std::copy(values, values + 8, b.values);
     part->push_back(b);
   });
-  tree_->addSiblingsInParts(f.parts, f.used, &f.pool, &f.counters);
+  tree_->addSiblingsInParts(f.parts, f.used, &f.pool, &f.counters, recordingLog());
   // A part holds at most one block's 512 sibling blocks; only a rare huge
   // update leaves many more parts than the next needs: let them go.
   if (f.parts.size() > kKeptPartsFactor * f.used + kKeptParts) f.parts.resize(f.used);
@@ -352,6 +390,7 @@ size_t MapAccumulator::prune() {
     insertBlocksOf(it.getKey(), it.getDepth(), &dirty_tiles_, kTileCells);
   }
   if (outside == 0) return 0;
+  classesChangedEverywhere();
   auto kept = std::make_unique<AccumulatingOcTree>(config_.resolution_m);
   for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it)
     if (inside(it)) kept->setLeaf(it.getKey(), it.getDepth(), it->getLogOdds());
@@ -462,6 +501,7 @@ size_t MapAccumulator::dropTile(const TileIndex& tile) {
   if (leaves == 0) return 0;
   tree_->dropNode(lo, kTileDepth);
   inner_stale_ = true;
+  classesChangedEverywhere();
   dirty_tiles_.erase(packBlock(tile));
   return leaves;
 }
@@ -471,6 +511,7 @@ void MapAccumulator::insertLeaves(const std::vector<Leaf>& leaves) {
   for (const Leaf& leaf : leaves) tree_->setLeaf(leaf.key, leaf.depth, std::clamp(leaf.log_odds, lo, hi));
   if (leaves.empty()) return;
   inner_stale_ = true;
+  classesChangedEverywhere();
   if (all_changed_) return;
   for (const Leaf& leaf : leaves) insertBlocksOf(leaf.key, leaf.depth, &changed_blocks_);
 }

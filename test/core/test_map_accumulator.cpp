@@ -482,3 +482,125 @@ TEST(MapAccumulator, TracksTheBlocksUpdatesChange) {
   EXPECT_TRUE(all);
   EXPECT_EQ(blocks.size(), 2u);
 }
+
+namespace {
+/// The class of the cell @p g in @p tree: its leaf's (a coarse one's too), or unknown.
+CellClass classIn(const octomap::OcTree& tree, const Eigen::Vector3i& g) {
+  const int offset = static_cast<int>(tree.coordToKey(0.0));
+  const octomap::OcTreeNode* node = tree.search(octomap::OcTreeKey(g.x() + offset, g.y() + offset, g.z() + offset));
+  return node ? classOfLogOdds(node->getLogOdds(), tree.getOccupancyThresLog()) : CellClass::kUnknown;
+}
+bool lessCell(const Eigen::Vector3i& a, const Eigen::Vector3i& b) {
+  return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
+}
+}  // namespace
+
+// The class changes the fusion records against each update's cells' classes
+// looked up before and after it: over a flight's overlapping views into a map
+// loaded with pruned cubes (expanded by the updates; two near the threshold,
+// one clamped), on 1, 2 and 3 threads: the same cells, each once, with its
+// class after the update; the tree the same as without recording.
+TEST(MapAccumulator, RecordsTheCellsWhoseClassAnUpdateChanged) {
+  const FlightScenario scenario = makeScenario("posts");
+  DrawingConfig drawing;
+  drawing.algorithm = DrawingAlgorithm::kLinePyramid;
+  DisparityDrawer drawer(scenario.camera, drawing);
+  std::vector<GridUpdate> updates;
+  for (size_t frame : {0u, 1u, 30u}) {
+    const Eigen::Isometry3d T = scenario.cameraPose(frame);
+    LocalGrid grid;
+    drawer.draw(renderStereoFrame(scenario, frame, 1), T, &grid);
+    updates.emplace_back();
+    encodeGridUpdate(grid, T.translation(), &updates.back());
+  }
+  MapAccumulatorConfig cfg;
+  octomap::OcTree cubes(cfg.resolution_m);
+  const int offset = static_cast<int>(cubes.coordToKey(0.0));
+  const Eigen::Vector3d ahead = scenario.cameraPose(0) * Eigen::Vector3d(0.0, 0.0, 12.0);
+  std::vector<std::pair<Eigen::Vector3i, int>> cube_boxes;  // first cell, edge
+  auto cube = [&](int edge, const Eigen::Vector3d& W_near, float log_odds) {
+    const Eigen::Vector3i first = (W_near / (cfg.resolution_m * edge)).array().floor().cast<int>() * edge;
+    cube_boxes.emplace_back(first, edge);
+    for (int z = 0; z < edge; ++z)
+      for (int y = 0; y < edge; ++y)
+        for (int x = 0; x < edge; ++x) {
+          const Eigen::Vector3i g = first + Eigen::Vector3i(x, y, z);
+          cubes.setNodeValue(octomap::OcTreeKey(g.x() + offset, g.y() + offset, g.z() + offset), log_odds);
+        }
+  };
+  auto inCube = [&](const Eigen::Vector3i& g) {
+    for (const auto& c : cube_boxes)
+      if ((g.array() >= c.first.array()).all() && (g.array() < c.first.array() + c.second).all()) return true;
+    return false;
+  };
+  // Near the threshold, so that the updates change their cells' classes; and one clamped (no change).
+  cube(16, ahead, -0.05f);
+  cube(8, ahead + Eigen::Vector3d(0.0, 0.0, -4.0), 0.05f);
+  cube(16, ahead + Eigen::Vector3d(0.0, 0.0, 4.0), static_cast<float>(logit(cfg.clamping_max_prob)));
+  cubes.updateInnerOccupancy();
+  cubes.prune();
+  ASSERT_LE(cubes.getNumLeafNodes(), 3u);
+  const std::string path = ::testing::TempDir() + "recording_cubes.ot";
+  ASSERT_TRUE(cubes.write(path));
+
+  MapAccumulatorConfig plain_cfg = cfg;
+  plain_cfg.threads = 1;
+  MapAccumulator plain(plain_cfg);  // never records
+  plain.load(path);
+  for (const GridUpdate& u : updates) ASSERT_TRUE(plain.integrate(u));
+  for (int threads : {1, 2, 3}) {
+    MapAccumulatorConfig c = cfg;
+    c.threads = threads;
+    MapAccumulator map(c);
+    map.load(path);
+    bool all = false;
+    EXPECT_TRUE(map.takeClassChanges(&all).empty());
+    EXPECT_FALSE(all);  // not recording
+    map.recordClassChanges(true);
+    EXPECT_TRUE(map.takeClassChanges(&all).empty());
+    EXPECT_TRUE(all);  // what the map holds is news to the caller
+    size_t expanded_changes = 0;
+    for (const GridUpdate& u : updates) {
+      std::vector<std::pair<Eigen::Vector3i, CellClass>> before;
+      u.forEachCell([&](const Eigen::Vector3i& g, float) { before.emplace_back(g, classIn(map.tree(), g)); });
+      ASSERT_TRUE(map.integrate(u));
+      std::vector<CellClassChange> expected;
+      for (const auto& b : before) {
+        const CellClass now = classIn(map.tree(), b.first);
+        if (now != b.second) expected.push_back(CellClassChange{b.first, now});
+        expanded_changes += inCube(b.first) && now != b.second;
+      }
+      std::vector<CellClassChange> got = map.takeClassChanges(&all);
+      EXPECT_FALSE(all);
+      auto sorted = [](std::vector<CellClassChange> v) {
+        std::sort(v.begin(), v.end(), [](const auto& a, const auto& b) { return lessCell(a.cell, b.cell); });
+        return v;
+      };
+      got = sorted(got);
+      expected = sorted(expected);
+      ASSERT_GT(expected.size(), 1000u);
+      ASSERT_EQ(got.size(), expected.size()) << threads << " threads";
+      for (size_t i = 0; i < got.size(); ++i) {
+        ASSERT_EQ(got[i].cell, expected[i].cell) << threads << " threads";
+        ASSERT_EQ(got[i].now, expected[i].now) << got[i].cell.transpose();
+      }
+    }
+    EXPECT_GT(expanded_changes, 0u) << "no cell of the pruned cubes changed class: move them";
+    EXPECT_EQ(fullTree(map.tree()), fullTree(plain.tree())) << threads << " threads";
+    // Anything but an update: all.
+    map.clearBox(ahead - Eigen::Vector3d::Constant(20.0), ahead + Eigen::Vector3d::Constant(20.0));
+    EXPECT_TRUE(map.takeClassChanges(&all).empty());
+    EXPECT_TRUE(all);
+    ASSERT_TRUE(map.integrate(updates[0]));
+    EXPECT_FALSE(map.takeClassChanges(&all).empty());
+    EXPECT_FALSE(all);
+    map.reset();
+    map.takeClassChanges(&all);
+    EXPECT_TRUE(all);
+    map.recordClassChanges(false);
+    ASSERT_TRUE(map.integrate(updates[0]));
+    EXPECT_TRUE(map.takeClassChanges(&all).empty());
+    EXPECT_FALSE(all);
+  }
+  std::remove(path.c_str());
+}

@@ -51,6 +51,14 @@ struct Timing {
   }
 };
 
+/// Starts the fusion's class change recording on @p map, if @p on, past the
+/// first "all" (which would skip it), as the distance field's feed does.
+void recordChanges(so::MapAccumulator* map, bool on) {
+  map->recordClassChanges(on);
+  bool all = false;
+  map->takeClassChanges(&all);
+}
+
 /// Times @p body @p repeats times; @p setup runs before each, untimed.
 Timing timeIt(int repeats, const std::function<void()>& setup, const std::function<void()>& body) {
   Timing t;
@@ -172,6 +180,7 @@ int run(int argc, char** argv) {
   long frame = 0, pace_ms = 0;
   int threads = 1;
   bool spans = true, stages = false;
+  bool record_changes = false;  // the fusion records the cells whose class it changed (the distance field's feed)
   std::map<std::string, double> model_values;  // the default stage's sensor model, by name
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -189,6 +198,8 @@ int run(int argc, char** argv) {
       pace_ms = so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 0, 10000);
     } else if (a == "--threads") {
       threads = static_cast<int>(so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 1, 64));
+    } else if (a == "--record-changes") {
+      record_changes = true;
     } else if (a == "--no-spans") {
       spans = false;
     } else if (a == "--stages") {
@@ -199,8 +210,8 @@ int run(int argc, char** argv) {
       frame = so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 0, 1000000);
     } else if (a == "--help") {
       std::cout << "usage: performance [--repeat N] [--only STAGE] [--scenario NAME [--frame K]] | --flight NAME "
-                   "[--pace-ms MS]; either with [--threads N]; [--model NAME=VALUE]... [--no-spans] | --stages "
-                   "(--scenario NAME [--frame K] | --flight NAME) [--threads N]\n"
+                   "[--pace-ms MS]; either with [--threads N]; [--model NAME=VALUE]... [--no-spans] "
+                   "[--record-changes] | --stages (--scenario NAME [--frame K] | --flight NAME) [--threads N]\n"
                    "Times the mapper's stages on the Table I frame (or frame K of a simulated flight, with its "
                    "stereo effects, seed 1) at 0.25 m (median and min-max of N runs, default 21) and OctoMap's "
                    "insertPointCloud on the same frame.\n"
@@ -210,6 +221,8 @@ int run(int argc, char** argv) {
                    "--threads N: draw, blur and fuse on N threads (default 1).\n"
                    "--model NAME=VALUE: a sensor model parameter of the default stage and of the flight's "
                    "line_pyramid_bounded row (e.g. gap_guard_cells=1), repeatable.\n"
+                   "--record-changes: the fusion stages record the cells whose class they change, as for the "
+                   "distance field (MapAccumulator::recordClassChanges).\n"
                    "--no-spans: the default descends into the blocks it draws as spans (the form before them).\n"
                    "--stages: the whole path as the nodelets run it (FrameMapping, MapFusion, the defaults), "
                    "image in to map fused, stage by stage, on frame K repeated N times or on every frame of the "
@@ -355,12 +368,18 @@ int run(int argc, char** argv) {
   if (wanted("fusion")) {
     std::unique_ptr<so::MapAccumulator> map;
     const Timing cold = timeIt(
-        repeat, [&] { map = std::make_unique<so::MapAccumulator>(map_config); }, [&] { map->integrate(update); });
+        repeat,
+        [&] {
+          map = std::make_unique<so::MapAccumulator>(map_config);
+          recordChanges(map.get(), record_changes);
+        },
+        [&] { map->integrate(update); });
     row("fusion, new map", cold, "the update into an empty OcTree");
     const Timing warm = timeIt(
         repeat,
         [&] {
           map = std::make_unique<so::MapAccumulator>(map_config);
+          recordChanges(map.get(), record_changes);
           map->integrate(update);
         },
         [&] { map->integrate(update); });
