@@ -12,6 +12,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>  // AlignedBox3d
 
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -97,8 +98,15 @@ class DistanceField {
   /// Largest number of waypoints checkPath() takes.
   static constexpr size_t kMaxWaypoints = 100000;
 
-  /// @throws std::invalid_argument if @p config is not valid or
-  /// @p resolution_m is not positive.
+  /// Edge of the blocks the window moves by and the updates recompute [cells].
+  static constexpr int kBlockCells = 8;
+  /// Largest window (cells; 4 bytes of distance, 1 of class and 8 of
+  /// scratch each): the window's edges are rounded up to whole blocks.
+  static constexpr size_t kMaxWindowCells = size_t{1} << 26;
+
+  /// @throws std::invalid_argument if @p config is not valid,
+  /// @p resolution_m is not positive, or the window would hold more than
+  /// kMaxWindowCells cells at that resolution.
   DistanceField(const DistanceFieldConfig& config, double resolution_m);
 
   const DistanceFieldConfig& config() const { return config_; }
@@ -109,6 +117,11 @@ class DistanceField {
   /// @p map), applies @p changes and recomputes the distances they can
   /// change. @p all: the map changed everywhere (load, reset, clear, prune):
   /// the window is read from @p map again. Work follows the changes.
+  /// A NaN / infinite @p W_vehicle leaves the window where it is.
+  /// Cells outside the window count as unknown: obstacles if
+  /// unknown_is_occupied (cells near the window's edge are then near an
+  /// obstacle), else not (distances near the edge ignore what lies beyond).
+  /// @throws std::invalid_argument if @p map's resolution is not the field's.
   void update(const octomap::OcTree& map, const std::vector<CellClassChange>& changes, bool all,
               const Eigen::Vector3d& W_vehicle);
 
@@ -121,7 +134,13 @@ class DistanceField {
 
   /// Checks the straight segments between @p W_waypoints for a body of
   /// radius @p radius_m: each cell the segments pass through must be known
-  /// and at least radius_m from the nearest obstacle (cell centres).
+  /// and at least radius_m from the nearest obstacle (cell centres), and not
+  /// occupied itself (radius 0). One waypoint: its cell, as segment 0.
+  /// Blocked: the walk stops at the first blocked cell (min_clearance_m up
+  /// to it); W_point is where the segment enters the first blocked or
+  /// unknown cell (or leaves the window). Work: at most the window's
+  /// cells along each segment (the parts outside it are unknown).
+  /// The waypoints are counted before anything is read or allocated.
   /// @throws std::invalid_argument for fewer than 1 or more than
   /// kMaxWaypoints waypoints, a NaN / infinite waypoint, a negative radius or
   /// one above max_distance_m.
@@ -129,7 +148,9 @@ class DistanceField {
                             bool unknown_as_occupied) const;
 
   /// Walks from @p W_origin along @p W_direction (any length) up to
-  /// @p max_range_m through the cells.
+  /// @p max_range_m through the cells: the first occupied cell is a hit, the
+  /// first unknown cell or the window's edge (the first cell beyond it) is
+  /// unknown; an origin outside the window is unknown at range 0.
   /// @throws std::invalid_argument for a NaN / infinite input, a zero
   /// direction, or a negative range.
   RayCastResult castRay(const Eigen::Vector3d& W_origin, const Eigen::Vector3d& W_direction, double max_range_m) const;
@@ -142,9 +163,101 @@ class DistanceField {
   size_t lastUpdatedCells() const { return last_updated_cells_; }
 
  private:
+  /// Cells are stored block by block (kBlockCells^3 each, x fastest inside),
+  /// blocks in a ring per axis: global block b lives in slot b mod n, so a
+  /// move rewrites only the blocks that enter. "Local" indices count from
+  /// the window's lowest cell / block.
+  static constexpr int kBlockShift = 3;
+  static constexpr int kBlockVolume = kBlockCells * kBlockCells * kBlockCells;
+  static_assert(kBlockCells == 1 << kBlockShift, "blocks are 2^kBlockShift cells");
+
+  size_t slotOf(const Eigen::Vector3i& local_block) const {
+    int s[3];
+    for (int a = 0; a < 3; ++a) {
+      s[a] = local_block[a] + ring_phase_[a];
+      if (s[a] >= size_blocks_[a]) s[a] -= size_blocks_[a];
+    }
+    return static_cast<size_t>(s[0]) + static_cast<size_t>(size_blocks_[0]) * (s[1] + size_blocks_[1] * s[2]);
+  }
+  /// Index of the local cell @p l (inside the window) in classes_ and sq_.
+  size_t cellIndex(const Eigen::Vector3i& l) const {
+    const size_t in_block =
+        static_cast<size_t>(((l.z() & (kBlockCells - 1)) << (2 * kBlockShift)) |
+                            ((l.y() & (kBlockCells - 1)) << kBlockShift) | (l.x() & (kBlockCells - 1)));
+    return slotOf(Eigen::Vector3i(l.x() >> kBlockShift, l.y() >> kBlockShift, l.z() >> kBlockShift)) * kBlockVolume +
+           in_block;
+  }
+  bool inside(const Eigen::Vector3i& l) const {
+    return (l.array() >= 0).all() && (l.array() < size_cells_.array()).all();
+  }
+  bool isObstacle(uint8_t cell_class) const {
+    return cell_class == static_cast<uint8_t>(CellClass::kOccupied) ||
+           (config_.unknown_is_occupied && cell_class == static_cast<uint8_t>(CellClass::kUnknown));
+  }
+  /// Distance of a stored squared distance [m].
+  float distanceOf(uint32_t sq) const {
+    return sq >= saturated_sq_ ? static_cast<float>(config_.max_distance_m)
+                               : std::sqrt(static_cast<float>(sq)) * static_cast<float>(resolution_m_);
+  }
+  /// The local cell of @p W_point, or false outside the window (or NaN).
+  bool localCell(const Eigen::Vector3d& W_point, Eigen::Vector3i* l) const;
+  Eigen::Vector3d centreOf(const Eigen::Vector3i& l) const;
+
+  // update()'s steps.
+  Eigen::Vector3i wantedOrigin(const Eigen::Vector3d& W_vehicle) const;
+  void moveTo(const octomap::OcTree& map, const Eigen::Vector3i& origin_block);
+  void readAll(const octomap::OcTree& map);
+  /// Sets the local blocks [lo, hi) unknown, reads them from @p map, marks them changed.
+  void readBlocks(const octomap::OcTree& map, const Eigen::Vector3i& lo, const Eigen::Vector3i& hi);
+  void applyChanges(const std::vector<CellClassChange>& changes);
+  void markChanged(const Eigen::Vector3i& local_block);
+  /// Marks the local blocks [lo, hi) for recomputation (without dilation).
+  void markRecompute(const Eigen::Vector3i& lo, const Eigen::Vector3i& hi);
+  void recompute();
+  void alongX(const Eigen::Vector3i& local_block);  // pass 1 into along_x_
+  void alongY(const Eigen::Vector3i& local_block);  // pass 2 into along_xy_
+  void alongZ(const Eigen::Vector3i& local_block);  // pass 3 into sq_
+  Eigen::Vector3i blockOfLinear(int linear) const;
+  int linearOfBlock(const Eigen::Vector3i& b) const {
+    return b.x() + size_blocks_.x() * (b.y() + size_blocks_.y() * b.z());
+  }
+
+  /// The part [t_in, t_out] of the segment @p W_from -> @p W_to (t in
+  /// [0, 1]) inside the window; false if none.
+  bool clip(const Eigen::Vector3d& W_from, const Eigen::Vector3d& W_to, double* t_in, double* t_out) const;
+  /// Walks the cells the segment's part [t_in, t_out] (clip()) passes
+  /// through (3D DDA, Amanatides & Woo), calling visit(local cell, t where
+  /// the segment enters it) until it returns false (then false). At the end
+  /// @p next_cell is the cell the segment would enter after the last one.
+  template <typename Visit>
+  bool walk(const Eigen::Vector3d& W_from, const Eigen::Vector3d& W_to, double t_in, double t_out,
+            Eigen::Vector3i* next_cell, Visit&& visit) const;
+
   DistanceFieldConfig config_;
   double resolution_m_;
   size_t last_updated_cells_ = 0;
+
+  Eigen::Vector3i size_blocks_;   ///< the window's edge [blocks]
+  Eigen::Vector3i size_cells_;    ///< the window's edge [cells]
+  Eigen::Vector3i origin_block_;  ///< global block index of the window's lowest block
+  Eigen::Vector3i ring_phase_;    ///< slot of the window's lowest block: origin_block_ mod size_blocks_
+  bool placed_ = false;           ///< an update() has placed the window
+  /// Squared distances at or above it read as max_distance_m [cells^2].
+  uint32_t saturated_sq_ = 0;
+  int reach_cells_ = 0;             ///< largest offset along one axis to an obstacle that is not saturated [cells]
+  int reach_blocks_ = 0;            ///< reach_cells_ in blocks, rounded up
+  float occupied_log_odds_ = 0.0f;  ///< the map's threshold (update())
+  std::vector<uint8_t> classes_;    ///< CellClass of each cell
+  std::vector<uint32_t> sq_;        ///< squared distance to the nearest obstacle, capped at saturated_sq_ [cells^2]
+  std::vector<uint32_t> along_x_;   ///< pass 1: squared distance along x (scratch)
+  std::vector<uint32_t> along_xy_;  ///< pass 2: in the xy plane (scratch)
+  std::vector<uint8_t> row_span_;   ///< pass 1: one row's obstacle flags with the reach on both sides (scratch)
+  std::vector<const uint8_t*> span_blocks_;  ///< pass 1: the class blocks of that span (scratch)
+  // The blocks of one update (local linear indices) and their marks (mark == epoch_: in the list).
+  uint32_t epoch_ = 0;
+  bool everything_ = false;  ///< this update recomputes the whole window
+  std::vector<uint32_t> changed_mark_, mark_x_, mark_y_, mark_z_;
+  std::vector<int> changed_, blocks_x_, blocks_y_, blocks_z_;
 };
 
 }  // namespace stereo_occupancy

@@ -1,0 +1,610 @@
+#include "stereo_occupancy/distance_field.h"
+
+#include <algorithm>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+
+#include "stereo_occupancy/accumulating_octree.h"  // leafOverlaps
+
+namespace stereo_occupancy {
+
+namespace {
+
+/// "No obstacle within reach" in the passes: above every real squared
+/// distance, and far from overflowing when the passes add k^2 twice.
+constexpr uint32_t kFar = uint32_t{1} << 30;
+/// The window re-centres when the vehicle is farther than this from its centre along an axis [blocks].
+constexpr double kRecentreBlocks = 1.0;
+/// Global cell index of OctoMap key 0 (the key of index 0 is 32768).
+constexpr int kKeyOffset = 32768;
+constexpr int kKeyMax = 65535;
+
+int floorDiv(int g, int n) { return g >= 0 ? g / n : -((-g + n - 1) / n); }
+int positiveMod(int g, int n) { return g - floorDiv(g, n) * n; }
+
+/// Puts block @p linear in @p list once per epoch.
+void mark(int linear, uint32_t epoch, std::vector<uint32_t>* marks, std::vector<int>* list) {
+  if ((*marks)[static_cast<size_t>(linear)] == epoch) return;
+  (*marks)[static_cast<size_t>(linear)] = epoch;
+  list->push_back(linear);
+}
+
+}  // namespace
+
+DistanceField::DistanceField(const DistanceFieldConfig& config, double resolution_m)
+    : config_(config), resolution_m_(resolution_m) {
+  std::string why;
+  if (!config_.isValid(&why)) throw std::invalid_argument("distance field: " + why);
+  if (!(resolution_m > 0.0) || !std::isfinite(resolution_m))
+    throw std::invalid_argument("distance field: the resolution must be positive, not " + std::to_string(resolution_m));
+  const double edges_m[3] = {config_.window_xy_m, config_.window_xy_m, config_.window_z_m};
+  double cells = 1.0;
+  for (int a = 0; a < 3; ++a) {
+    const double blocks = std::max(1.0, std::ceil(edges_m[a] / resolution_m / kBlockCells - 1e-9));
+    cells *= blocks * kBlockCells;
+    size_blocks_[a] = static_cast<int>(std::min(blocks, 1e6));
+  }
+  if (cells > static_cast<double>(kMaxWindowCells))
+    throw std::invalid_argument("distance field: a window of " + std::to_string(config_.window_xy_m) + " x " +
+                                std::to_string(config_.window_xy_m) + " x " + std::to_string(config_.window_z_m) +
+                                " m at " + std::to_string(resolution_m) + " m holds more than " +
+                                std::to_string(kMaxWindowCells) + " cells");
+  size_cells_ = size_blocks_ * kBlockCells;
+  // Distances saturate from sqrt(saturated_sq_) cells on: the smallest
+  // integer c with sqrt(c) * resolution >= max_distance_m. Every squared
+  // distance below it has each axis offset at most reach_cells_.
+  const double reach = config_.max_distance_m / resolution_m;
+  saturated_sq_ = static_cast<uint32_t>(std::max(1.0, std::ceil(reach * reach * (1.0 - 1e-12))));
+  reach_cells_ = static_cast<int>(std::floor(std::sqrt(static_cast<double>(saturated_sq_ - 1))));
+  while (static_cast<uint32_t>(reach_cells_ * reach_cells_) > saturated_sq_ - 1) --reach_cells_;
+  while (static_cast<uint32_t>((reach_cells_ + 1) * (reach_cells_ + 1)) <= saturated_sq_ - 1) ++reach_cells_;
+  reach_blocks_ = (reach_cells_ + kBlockCells - 1) / kBlockCells;
+
+  const size_t n = static_cast<size_t>(size_cells_.x()) * size_cells_.y() * size_cells_.z();
+  const size_t blocks = n / kBlockVolume;
+  classes_.assign(n, static_cast<uint8_t>(CellClass::kUnknown));
+  // Everything unknown: an obstacle everywhere, or none.
+  sq_.assign(n, config_.unknown_is_occupied ? 0u : saturated_sq_);
+  along_x_.assign(n, kFar);
+  along_xy_.assign(n, kFar);
+  row_span_.assign(static_cast<size_t>(kBlockCells + 2 * reach_blocks_ * kBlockCells), 0);
+  span_blocks_.assign(static_cast<size_t>(2 * reach_blocks_ + 1), nullptr);
+  for (auto* marks : {&changed_mark_, &mark_x_, &mark_y_, &mark_z_}) marks->assign(blocks, 0);
+  for (auto* list : {&changed_, &blocks_x_, &blocks_y_, &blocks_z_}) list->reserve(blocks);
+  origin_block_ = -size_blocks_ / 2;
+  for (int a = 0; a < 3; ++a) ring_phase_[a] = positiveMod(origin_block_[a], size_blocks_[a]);
+}
+
+Eigen::AlignedBox3d DistanceField::window() const {
+  const Eigen::Vector3d lo = (origin_block_ * kBlockCells).cast<double>() * resolution_m_;
+  return Eigen::AlignedBox3d(lo, lo + size_cells_.cast<double>() * resolution_m_);
+}
+
+bool DistanceField::localCell(const Eigen::Vector3d& W_point, Eigen::Vector3i* l) const {
+  if (!W_point.allFinite()) return false;
+  const Eigen::AlignedBox3d box = window();
+  // Outside the box first: the index of a far point would not fit an int.
+  if (!((W_point.array() >= box.min().array()).all() && (W_point.array() <= box.max().array()).all())) return false;
+  *l = (W_point / resolution_m_).array().floor().cast<int>().matrix() - origin_block_ * kBlockCells;
+  return inside(*l);  // a point on the upper faces belongs to the next cell
+}
+
+Eigen::Vector3d DistanceField::centreOf(const Eigen::Vector3i& l) const {
+  return ((l + origin_block_ * kBlockCells).cast<double>() + Eigen::Vector3d::Constant(0.5)) * resolution_m_;
+}
+
+Eigen::Vector3i DistanceField::blockOfLinear(int linear) const {
+  const int x = linear % size_blocks_.x();
+  const int yz = linear / size_blocks_.x();
+  return Eigen::Vector3i(x, yz % size_blocks_.y(), yz / size_blocks_.y());
+}
+
+// --- update -------------------------------------------------------------------
+
+void DistanceField::update(const octomap::OcTree& map, const std::vector<CellClassChange>& changes, bool all,
+                           const Eigen::Vector3d& W_vehicle) {
+  if (std::abs(map.getResolution() - resolution_m_) > 1e-9 * resolution_m_)
+    throw std::invalid_argument("distance field: the map's resolution " + std::to_string(map.getResolution()) +
+                                " m is not the field's " + std::to_string(resolution_m_) + " m");
+  occupied_log_odds_ = map.getOccupancyThresLog();
+  ++epoch_;
+  everything_ = false;
+  for (auto* list : {&changed_, &blocks_x_, &blocks_y_, &blocks_z_}) list->clear();
+  const Eigen::Vector3i origin = W_vehicle.allFinite() ? wantedOrigin(W_vehicle) : origin_block_;
+  if (!placed_ || all || ((origin - origin_block_).array().abs() >= size_blocks_.array()).any()) {
+    // First, a jump beyond the window, or a map changed everywhere: read it all.
+    origin_block_ = origin;
+    for (int a = 0; a < 3; ++a) ring_phase_[a] = positiveMod(origin_block_[a], size_blocks_[a]);
+    readAll(map);
+    placed_ = true;
+  } else {
+    if (origin != origin_block_) moveTo(map, origin);
+    applyChanges(changes);
+  }
+  recompute();
+}
+
+Eigen::Vector3i DistanceField::wantedOrigin(const Eigen::Vector3d& W_vehicle) const {
+  const double block_m = kBlockCells * resolution_m_;
+  // Within the OcTree's key range: an index beyond it would not fit an int.
+  const double limit_m = (kKeyOffset + 1.0) * resolution_m_;
+  const Eigen::Vector3d W_v = W_vehicle.cwiseMax(-limit_m).cwiseMin(limit_m);
+  const Eigen::Vector3d W_centre = window().center();
+  Eigen::Vector3i origin = origin_block_;
+  for (int a = 0; a < 3; ++a) {
+    // Hysteresis: the window follows once the vehicle is a block off its
+    // centre, so a vehicle hovering on a block's face does not move it to and fro.
+    if (placed_ && std::abs(W_v[a] - W_centre[a]) <= kRecentreBlocks * block_m) continue;
+    origin[a] = static_cast<int>(std::floor(W_v[a] / block_m)) - size_blocks_[a] / 2;
+  }
+  return origin;
+}
+
+void DistanceField::moveTo(const octomap::OcTree& map, const Eigen::Vector3i& origin_block) {
+  const Eigen::Vector3i shift = origin_block - origin_block_;
+  origin_block_ = origin_block;
+  for (int a = 0; a < 3; ++a) ring_phase_[a] = positiveMod(origin_block_[a], size_blocks_[a]);
+  // The blocks that enter: a slab per axis that moved, each without the
+  // slabs of the axes before it (local block ranges [lo, hi)).
+  Eigen::Vector3i rest_lo = Eigen::Vector3i::Zero(), rest_hi = size_blocks_;
+  for (int a = 0; a < 3; ++a) {
+    if (shift[a] == 0) continue;
+    Eigen::Vector3i lo = rest_lo, hi = rest_hi;
+    if (shift[a] > 0) {
+      lo[a] = size_blocks_[a] - shift[a];
+      rest_hi[a] = lo[a];
+    } else {
+      hi[a] = -shift[a];
+      rest_lo[a] = hi[a];
+    }
+    readBlocks(map, lo, hi);
+  }
+  // The cells within reach of the side that left: their nearest obstacle
+  // may have left (or, unknown being occupied, the edge came nearer).
+  for (int a = 0; a < 3; ++a) {
+    if (shift[a] == 0) continue;
+    Eigen::Vector3i lo = Eigen::Vector3i::Zero(), hi = size_blocks_;
+    if (shift[a] > 0)
+      hi[a] = std::min(reach_blocks_, size_blocks_[a]);
+    else
+      lo[a] = std::max(0, size_blocks_[a] - reach_blocks_);
+    markRecompute(lo, hi);
+  }
+}
+
+void DistanceField::readAll(const octomap::OcTree& map) {
+  everything_ = true;
+  readBlocks(map, Eigen::Vector3i::Zero(), size_blocks_);
+}
+
+void DistanceField::readBlocks(const octomap::OcTree& map, const Eigen::Vector3i& lo, const Eigen::Vector3i& hi) {
+  if ((hi.array() <= lo.array()).any()) return;
+  for (int z = lo.z(); z < hi.z(); ++z)
+    for (int y = lo.y(); y < hi.y(); ++y)
+      for (int x = lo.x(); x < hi.x(); ++x) {
+        const Eigen::Vector3i b(x, y, z);
+        std::memset(&classes_[slotOf(b) * kBlockVolume], static_cast<int>(CellClass::kUnknown), kBlockVolume);
+        if (!everything_) markChanged(b);
+      }
+  // The box's keys, cut to the key range (beyond it the map holds nothing).
+  const Eigen::Vector3i g_lo = (origin_block_ + lo) * kBlockCells;
+  const Eigen::Vector3i g_hi = (origin_block_ + hi) * kBlockCells - Eigen::Vector3i::Ones();
+  octomap::OcTreeKey key_lo, key_hi;
+  for (int a = 0; a < 3; ++a) {
+    const int k_lo = g_lo[a] + kKeyOffset, k_hi = g_hi[a] + kKeyOffset;
+    if (k_hi < 0 || k_lo > kKeyMax) return;
+    key_lo[a] = static_cast<octomap::key_type>(std::max(k_lo, 0));
+    key_hi[a] = static_cast<octomap::key_type>(std::min(k_hi, kKeyMax));
+  }
+  const unsigned depth = map.getTreeDepth();
+  for (auto it = map.begin_leafs_bbx(key_lo, key_hi), end = map.end_leafs_bbx(); it != end; ++it) {
+    if (!leafOverlaps(it, depth, key_lo, key_hi)) continue;  // octomap 1.9 hands out some just outside
+    const uint8_t cell_class = static_cast<uint8_t>(classOfLogOdds(it->getLogOdds(), occupied_log_odds_));
+    // A pruned leaf covers several cells: its part inside the box.
+    const octomap::OcTreeKey first = it.getIndexKey();
+    const int side = 1 << (depth - it.getDepth());
+    Eigen::Vector3i from, to;
+    for (int a = 0; a < 3; ++a) {
+      from[a] = std::max<int>(first[a], key_lo[a]) - kKeyOffset - origin_block_[a] * kBlockCells;
+      to[a] = std::min<int>(first[a] + side - 1, key_hi[a]) - kKeyOffset - origin_block_[a] * kBlockCells;
+    }
+    Eigen::Vector3i l;
+    for (l.z() = from.z(); l.z() <= to.z(); ++l.z())
+      for (l.y() = from.y(); l.y() <= to.y(); ++l.y())
+        for (l.x() = from.x(); l.x() <= to.x(); ++l.x()) classes_[cellIndex(l)] = cell_class;
+  }
+}
+
+void DistanceField::applyChanges(const std::vector<CellClassChange>& changes) {
+  const Eigen::Vector3i origin_cell = origin_block_ * kBlockCells;
+  for (const CellClassChange& c : changes) {
+    const Eigen::Vector3i l = c.cell - origin_cell;
+    if (!inside(l)) continue;  // read from the map when it enters
+    uint8_t& cell_class = classes_[cellIndex(l)];
+    const uint8_t now = static_cast<uint8_t>(c.now);
+    if (cell_class == now) continue;
+    // Only a change of obstacle status moves distances (unknown -> free, the
+    // most common, does not unless unknown is occupied).
+    const bool moved = isObstacle(cell_class) != isObstacle(now);
+    cell_class = now;
+    if (moved) markChanged(Eigen::Vector3i(l.x() >> kBlockShift, l.y() >> kBlockShift, l.z() >> kBlockShift));
+  }
+}
+
+void DistanceField::markChanged(const Eigen::Vector3i& local_block) {
+  mark(linearOfBlock(local_block), epoch_, &changed_mark_, &changed_);
+}
+
+void DistanceField::markRecompute(const Eigen::Vector3i& lo, const Eigen::Vector3i& hi) {
+  for (int z = lo.z(); z < hi.z(); ++z)
+    for (int y = lo.y(); y < hi.y(); ++y)
+      for (int x = lo.x(); x < hi.x(); ++x) {
+        const Eigen::Vector3i b(x, y, z);
+        mark(linearOfBlock(b), epoch_, &mark_z_, &blocks_z_);
+      }
+}
+
+void DistanceField::recompute() {
+  if (everything_) {
+    for (int i = 0, n = static_cast<int>(changed_mark_.size()); i < n; ++i) {
+      blocks_x_.push_back(i);
+      blocks_y_.push_back(i);
+      blocks_z_.push_back(i);
+    }
+  } else {
+    // Only cells within reach of a changed cell can change: the changed
+    // blocks dilated by the reach (pass 3, along z), then the cells pass 3
+    // reads (dilated along z: pass 2), then the cells pass 2 reads (along y: pass 1).
+    const int r = reach_blocks_;
+    auto dilate = [&](const std::vector<int>& from, const Eigen::Vector3i& by, std::vector<uint32_t>* marks,
+                      std::vector<int>* list) {
+      for (size_t i = 0; i < from.size(); ++i) {
+        const Eigen::Vector3i b = blockOfLinear(from[i]);
+        const Eigen::Vector3i lo = (b - by).cwiseMax(0), hi = (b + by).cwiseMin(size_blocks_ - Eigen::Vector3i::Ones());
+        for (int z = lo.z(); z <= hi.z(); ++z)
+          for (int y = lo.y(); y <= hi.y(); ++y)
+            for (int x = lo.x(); x <= hi.x(); ++x) {
+              const Eigen::Vector3i d(x, y, z);
+              mark(linearOfBlock(d), epoch_, marks, list);
+            }
+      }
+    };
+    dilate(changed_, Eigen::Vector3i::Constant(r), &mark_z_, &blocks_z_);
+    dilate(blocks_z_, Eigen::Vector3i(0, 0, r), &mark_y_, &blocks_y_);
+    dilate(blocks_y_, Eigen::Vector3i(0, r, 0), &mark_x_, &blocks_x_);
+  }
+  for (int b : blocks_x_) alongX(blockOfLinear(b));
+  for (int b : blocks_y_) alongY(blockOfLinear(b));
+  for (int b : blocks_z_) alongZ(blockOfLinear(b));
+  last_updated_cells_ = blocks_z_.size() * kBlockVolume;
+}
+
+// Pass 1: per row of a block, the distance along x to the nearest obstacle
+// within reach (squared), from the row's classes and the reach on both sides.
+void DistanceField::alongX(const Eigen::Vector3i& b) {
+  const int r = reach_blocks_, d = reach_cells_;
+  const uint8_t outside = config_.unknown_is_occupied ? 1 : 0;
+  uint32_t* out = &along_x_[slotOf(b) * kBlockVolume];
+  const uint8_t** rows = span_blocks_.data();  // the class blocks of the span, null outside the window
+  const int span_blocks = 2 * r + 1;
+  for (int i = 0; i < span_blocks; ++i) {
+    const Eigen::Vector3i n(b.x() - r + i, b.y(), b.z());
+    rows[i] = (n.x() >= 0 && n.x() < size_blocks_.x()) ? &classes_[slotOf(n) * kBlockVolume] : nullptr;
+  }
+  uint8_t* span = row_span_.data();   // obstacle flags of positions [-r * 8, (r + 1) * 8) around the block
+  const int first = r * kBlockCells;  // the block's first cell in span
+  for (int row = 0; row < kBlockCells * kBlockCells; ++row) {
+    for (int i = 0; i < span_blocks; ++i) {
+      uint8_t* s = span + i * kBlockCells;
+      if (!rows[i]) {
+        std::memset(s, outside, kBlockCells);
+        continue;
+      }
+      const uint8_t* c = rows[i] + row * kBlockCells;
+      for (int x = 0; x < kBlockCells; ++x) s[x] = isObstacle(c[x]) ? 1 : 0;
+    }
+    int dist[kBlockCells];
+    int last = std::numeric_limits<int>::min() / 2;  // the nearest obstacle on the left
+    for (int p = first - d; p < first + kBlockCells; ++p) {
+      if (span[p]) last = p;
+      if (p >= first) dist[p - first] = p - last;
+    }
+    int next = std::numeric_limits<int>::max() / 2;  // on the right
+    for (int p = first + kBlockCells - 1 + d; p >= first; --p) {
+      if (span[p]) next = p;
+      if (p < first + kBlockCells) dist[p - first] = std::min(dist[p - first], next - p);
+    }
+    uint32_t* o = out + row * kBlockCells;
+    for (int x = 0; x < kBlockCells; ++x) o[x] = dist[x] <= d ? static_cast<uint32_t>(dist[x] * dist[x]) : kFar;
+  }
+}
+
+namespace {
+/// One row of 8 lanes: acc = min(acc, row + k^2) (vectorises across x).
+inline void minRow(uint32_t* acc, const uint32_t* row, uint32_t k2) {
+  for (int x = 0; x < DistanceField::kBlockCells; ++x) acc[x] = std::min(acc[x], row[x] + k2);
+}
+}  // namespace
+
+// Pass 2: g(x, y) = min over |k| <= reach of pass 1's g(x, y + k) + k^2.
+void DistanceField::alongY(const Eigen::Vector3i& b) {
+  const int d = reach_cells_;
+  const uint32_t outside_value = config_.unknown_is_occupied ? 0u : kFar;
+  const uint32_t outside_row[kBlockCells] = {outside_value, outside_value, outside_value, outside_value,
+                                             outside_value, outside_value, outside_value, outside_value};
+  uint32_t* out = &along_xy_[slotOf(b) * kBlockVolume];
+  for (int z = 0; z < kBlockCells; ++z)
+    for (int y = 0; y < kBlockCells; ++y) {
+      uint32_t acc[kBlockCells];
+      std::fill(acc, acc + kBlockCells, kFar);
+      const int ly = b.y() * kBlockCells + y;
+      for (int k = -d; k <= d; ++k) {
+        const int yy = ly + k;
+        const uint32_t* row = outside_row;
+        if (yy >= 0 && yy < size_cells_.y()) {
+          const Eigen::Vector3i nb(b.x(), yy >> kBlockShift, b.z());
+          row = &along_x_[slotOf(nb) * kBlockVolume +
+                          static_cast<size_t>((z << (2 * kBlockShift)) | ((yy & (kBlockCells - 1)) << kBlockShift))];
+        }
+        minRow(acc, row, static_cast<uint32_t>(k * k));
+      }
+      std::copy(acc, acc + kBlockCells, out + ((z << (2 * kBlockShift)) | (y << kBlockShift)));
+    }
+}
+
+// Pass 3: along z from pass 2, capped where distances saturate.
+void DistanceField::alongZ(const Eigen::Vector3i& b) {
+  const int d = reach_cells_;
+  const uint32_t outside_value = config_.unknown_is_occupied ? 0u : kFar;
+  const uint32_t outside_row[kBlockCells] = {outside_value, outside_value, outside_value, outside_value,
+                                             outside_value, outside_value, outside_value, outside_value};
+  uint32_t* out = &sq_[slotOf(b) * kBlockVolume];
+  for (int z = 0; z < kBlockCells; ++z)
+    for (int y = 0; y < kBlockCells; ++y) {
+      uint32_t acc[kBlockCells];
+      std::fill(acc, acc + kBlockCells, kFar);
+      const int lz = b.z() * kBlockCells + z;
+      for (int k = -d; k <= d; ++k) {
+        const int zz = lz + k;
+        const uint32_t* row = outside_row;
+        if (zz >= 0 && zz < size_cells_.z()) {
+          const Eigen::Vector3i nb(b.x(), b.y(), zz >> kBlockShift);
+          row = &along_xy_[slotOf(nb) * kBlockVolume +
+                           static_cast<size_t>(((zz & (kBlockCells - 1)) << (2 * kBlockShift)) | (y << kBlockShift))];
+        }
+        minRow(acc, row, static_cast<uint32_t>(k * k));
+      }
+      uint32_t* o = out + ((z << (2 * kBlockShift)) | (y << kBlockShift));
+      for (int x = 0; x < kBlockCells; ++x) o[x] = std::min(acc[x], saturated_sq_);
+    }
+}
+
+// --- queries ------------------------------------------------------------------
+
+DistanceSample DistanceField::sample(const Eigen::Vector3d& W_point) const {
+  DistanceSample s;
+  Eigen::Vector3i l;
+  if (!localCell(W_point, &l)) {
+    s.distance_m = std::numeric_limits<float>::quiet_NaN();
+    return s;
+  }
+  s.in_window = true;
+  const size_t index = cellIndex(l);
+  s.cell_class = static_cast<CellClass>(classes_[index]);
+  const uint32_t sq = sq_[index];
+  s.distance_m = distanceOf(sq);
+  if (sq >= saturated_sq_) return s;  // flat: no gradient
+  for (int a = 0; a < 3; ++a) {
+    // Central differences; one-sided at the window's edges.
+    Eigen::Vector3i lo = l, hi = l;
+    if (l[a] > 0) --lo[a];
+    if (l[a] + 1 < size_cells_[a]) ++hi[a];
+    if (hi[a] == lo[a]) continue;
+    s.gradient[a] = (distanceOf(sq_[cellIndex(hi)]) - distanceOf(sq_[cellIndex(lo)])) /
+                    (static_cast<float>(hi[a] - lo[a]) * static_cast<float>(resolution_m_));
+  }
+  return s;
+}
+
+bool DistanceField::clip(const Eigen::Vector3d& W_from, const Eigen::Vector3d& W_to, double* t_in,
+                         double* t_out) const {
+  const Eigen::AlignedBox3d box = window();
+  const Eigen::Vector3d dir = W_to - W_from;
+  double t0 = 0.0, t1 = 1.0;
+  for (int a = 0; a < 3; ++a) {  // the slabs between the window's faces
+    if (dir[a] == 0.0) {
+      if (W_from[a] < box.min()[a] || W_from[a] > box.max()[a]) return false;
+      continue;
+    }
+    double ta = (box.min()[a] - W_from[a]) / dir[a], tb = (box.max()[a] - W_from[a]) / dir[a];
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+  }
+  *t_in = t0;
+  *t_out = t1;
+  return t0 <= t1;
+}
+
+template <typename Visit>
+bool DistanceField::walk(const Eigen::Vector3d& W_from, const Eigen::Vector3d& W_to, double t_in, double t_out,
+                         Eigen::Vector3i* next_cell, Visit&& visit) const {
+  const Eigen::Vector3d dir = W_to - W_from;
+  const Eigen::Vector3i origin_cell = origin_block_ * kBlockCells;
+  const Eigen::Vector3i top = size_cells_ - Eigen::Vector3i::Ones();
+  auto cellAt = [&](double t) {  // on the window's faces the cell inside
+    const Eigen::Vector3d p = (W_from + t * dir) / resolution_m_;
+    return (p.array().floor().cast<int>().matrix() - origin_cell).cwiseMax(0).cwiseMin(top).eval();
+  };
+  Eigen::Vector3i cell = cellAt(t_in);
+  const Eigen::Vector3i last = cellAt(t_out);
+  // Amanatides & Woo: per axis the t of the next face crossed and the t per cell.
+  Eigen::Vector3i step, remaining;
+  Eigen::Vector3d t_max, t_delta;
+  for (int a = 0; a < 3; ++a) {
+    step[a] = dir[a] > 0.0 ? 1 : (dir[a] < 0.0 ? -1 : 0);
+    remaining[a] = std::abs(last[a] - cell[a]);
+    if (step[a] == 0) {
+      t_max[a] = std::numeric_limits<double>::infinity();
+      t_delta[a] = 0.0;
+      continue;
+    }
+    const double face_m = (origin_cell[a] + cell[a] + (step[a] > 0 ? 1 : 0)) * resolution_m_;
+    t_max[a] = (face_m - W_from[a]) / dir[a];
+    t_delta[a] = resolution_m_ / std::abs(dir[a]);
+  }
+  double t = t_in;
+  if (!visit(cell, t)) return false;
+  // Exactly as many steps as faces between the first and the last cell:
+  // the walk ends in the last cell whatever the rounding.
+  for (int left = remaining.sum(); left > 0; --left) {
+    int axis = -1;
+    for (int a = 0; a < 3; ++a)
+      if (remaining[a] > 0 && (axis < 0 || t_max[a] < t_max[axis])) axis = a;
+    t = std::min(std::max(t, t_max[axis]), t_out);
+    cell[axis] += step[axis];
+    t_max[axis] += t_delta[axis];
+    --remaining[axis];
+    if (!visit(cell, t)) return false;
+  }
+  // The cell after the last one: across the face the segment crosses next.
+  int axis = 0;
+  for (int a = 1; a < 3; ++a)
+    if (t_max[a] < t_max[axis]) axis = a;
+  *next_cell = cell;
+  (*next_cell)[axis] += step[axis];
+  return true;
+}
+
+namespace {
+void requireFinite(const Eigen::Vector3d& v, const char* what) {
+  if (!v.allFinite()) throw std::invalid_argument(std::string("distance field: ") + what + " is NaN or infinite");
+}
+}  // namespace
+
+PathCheckResult DistanceField::checkPath(const std::vector<Eigen::Vector3d>& W_waypoints, double radius_m,
+                                         bool unknown_as_occupied) const {
+  if (W_waypoints.empty() || W_waypoints.size() > kMaxWaypoints)
+    throw std::invalid_argument("checkPath: " + std::to_string(W_waypoints.size()) + " waypoints; 1 to " +
+                                std::to_string(kMaxWaypoints) + " are taken");
+  if (!(radius_m >= 0.0 && radius_m <= config_.max_distance_m))
+    throw std::invalid_argument("checkPath: the radius " + std::to_string(radius_m) + " m is not in [0, " +
+                                std::to_string(config_.max_distance_m) + "] m (max_distance_m)");
+  for (size_t i = 0; i < W_waypoints.size(); ++i)
+    if (!W_waypoints[i].allFinite())
+      throw std::invalid_argument("checkPath: waypoint " + std::to_string(i) + " is NaN or infinite");
+
+  PathCheckResult result;
+  long unknown_segment = -1;
+  Eigen::Vector3d W_unknown = Eigen::Vector3d::Zero();
+  double min_clearance_m = std::numeric_limits<double>::infinity();
+  auto finish = [&](PathVerdict verdict) {
+    result.verdict = verdict;
+    result.min_clearance_m = std::isinf(min_clearance_m) ? 0.0 : min_clearance_m;
+    if (verdict == PathVerdict::kUnknown) {
+      result.first_segment = unknown_segment;
+      result.W_point = W_unknown;
+    }
+    return result;
+  };
+  const size_t segments = std::max<size_t>(1, W_waypoints.size() - 1);
+  for (size_t i = 0; i < segments; ++i) {
+    const Eigen::Vector3d& a = W_waypoints[i];
+    const Eigen::Vector3d& b = W_waypoints[std::min(i + 1, W_waypoints.size() - 1)];
+    bool blocked = false;
+    // Unknown at t along the segment: blocked if asked, else the first unknown point.
+    auto unknownAt = [&](double t) {
+      if (unknown_as_occupied) {
+        blocked = true;
+        result.first_segment = static_cast<long>(i);
+        result.W_point = a + t * (b - a);
+      } else if (unknown_segment < 0) {
+        unknown_segment = static_cast<long>(i);
+        W_unknown = a + t * (b - a);
+      }
+    };
+    double t_in = 0.0, t_out = 1.0;
+    const bool crosses = clip(a, b, &t_in, &t_out);
+    if (!crosses || t_in > 0.0) unknownAt(0.0);  // it starts outside the window
+    if (blocked) return finish(PathVerdict::kBlocked);
+    if (!crosses) continue;
+    Eigen::Vector3i next;
+    walk(a, b, t_in, t_out, &next, [&](const Eigen::Vector3i& l, double t) {
+      const size_t index = cellIndex(l);
+      const bool known = classes_[index] != static_cast<uint8_t>(CellClass::kUnknown);
+      const double d = distanceOf(sq_[index]);
+      if (known) min_clearance_m = std::min(min_clearance_m, d);
+      if (classes_[index] == static_cast<uint8_t>(CellClass::kOccupied) || d < radius_m) {
+        blocked = true;
+        result.first_segment = static_cast<long>(i);
+        result.W_point = a + t * (b - a);
+        return false;
+      }
+      if (!known) unknownAt(t);
+      return !blocked;
+    });
+    if (!blocked && t_out < 1.0) unknownAt(t_out);  // it leaves the window
+    if (blocked) return finish(PathVerdict::kBlocked);
+  }
+  return finish(unknown_segment >= 0 ? PathVerdict::kUnknown : PathVerdict::kClear);
+}
+
+RayCastResult DistanceField::castRay(const Eigen::Vector3d& W_origin, const Eigen::Vector3d& W_direction,
+                                     double max_range_m) const {
+  requireFinite(W_origin, "castRay: the origin");
+  requireFinite(W_direction, "castRay: the direction");
+  if (!std::isfinite(max_range_m) || max_range_m < 0.0)
+    throw std::invalid_argument("castRay: the range " + std::to_string(max_range_m) +
+                                " m must be finite and not negative");
+  const double norm = W_direction.norm();
+  if (!(norm > 0.0) || !std::isfinite(norm)) throw std::invalid_argument("castRay: the direction is zero");
+  const Eigen::Vector3d dir = W_direction / norm;
+  const Eigen::Vector3d W_end = W_origin + dir * max_range_m;
+  RayCastResult result;
+  double t_in = 0.0, t_out = 1.0;
+  if (!clip(W_origin, W_end, &t_in, &t_out) || t_in > 0.0) {  // the origin lies outside the window
+    result.verdict = RayVerdict::kUnknown;
+    result.W_point = ((W_origin / resolution_m_).array().floor() + 0.5).matrix() * resolution_m_;
+    return result;
+  }
+  Eigen::Vector3i next;
+  const bool walked = walk(W_origin, W_end, t_in, t_out, &next, [&](const Eigen::Vector3i& l, double t) {
+    const uint8_t c = classes_[cellIndex(l)];
+    if (c == static_cast<uint8_t>(CellClass::kFree)) return true;
+    result.verdict = c == static_cast<uint8_t>(CellClass::kOccupied) ? RayVerdict::kHit : RayVerdict::kUnknown;
+    result.W_point = centreOf(l);
+    result.range_m = t * max_range_m;
+    return false;
+  });
+  if (!walked) return result;
+  if (t_out < 1.0) {  // the window's edge before the range
+    result.verdict = RayVerdict::kUnknown;
+    result.W_point = centreOf(next);
+    result.range_m = t_out * max_range_m;
+    return result;
+  }
+  result.verdict = RayVerdict::kFree;
+  result.W_point = W_end;
+  result.range_m = max_range_m;
+  return result;
+}
+
+void DistanceField::slice(double z_m, std::vector<Eigen::Vector3f>* W_centres, std::vector<float>* distances_m) const {
+  W_centres->clear();
+  distances_m->clear();
+  const Eigen::AlignedBox3d box = window();
+  if (!std::isfinite(z_m) || z_m < box.min().z() || z_m >= box.max().z()) return;
+  const int lz = static_cast<int>(std::floor(z_m / resolution_m_)) - origin_block_.z() * kBlockCells;
+  if (lz < 0 || lz >= size_cells_.z()) return;
+  Eigen::Vector3i l(0, 0, lz);
+  for (l.y() = 0; l.y() < size_cells_.y(); ++l.y())
+    for (l.x() = 0; l.x() < size_cells_.x(); ++l.x()) {
+      const size_t index = cellIndex(l);
+      if (classes_[index] == static_cast<uint8_t>(CellClass::kUnknown)) continue;
+      W_centres->push_back(centreOf(l).cast<float>());
+      distances_m->push_back(distanceOf(sq_[index]));
+    }
+}
+
+}  // namespace stereo_occupancy
