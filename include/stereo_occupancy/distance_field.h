@@ -217,6 +217,11 @@ class DistanceField {
   void alongX(const Eigen::Vector3i& local_block);  // pass 1 into along_x_
   void alongY(const Eigen::Vector3i& local_block);  // pass 2 into along_xy_
   void alongZ(const Eigen::Vector3i& local_block);  // pass 3 into sq_
+  /// Points span_values_ at the blocks of @p values within the reach of
+  /// block @p b along @p axis (null outside the window); false if none of
+  /// them holds a value below kFar (@p finite) and the outside holds none.
+  bool gatherSpan(const Eigen::Vector3i& b, int axis, const std::vector<uint32_t>& values,
+                  const std::vector<uint8_t>& finite);
   Eigen::Vector3i blockOfLinear(int linear) const;
   int linearOfBlock(const Eigen::Vector3i& b) const {
     return b.x() + size_blocks_.x() * (b.y() + size_blocks_.y() * b.z());
@@ -252,7 +257,11 @@ class DistanceField {
   std::vector<uint32_t> along_x_;   ///< pass 1: squared distance along x (scratch)
   std::vector<uint32_t> along_xy_;  ///< pass 2: in the xy plane (scratch)
   std::vector<uint8_t> row_span_;   ///< pass 1: one row's obstacle flags with the reach on both sides (scratch)
-  std::vector<const uint8_t*> span_blocks_;  ///< pass 1: the class blocks of that span (scratch)
+  std::vector<const uint8_t*> span_blocks_;   ///< pass 1: the class blocks of that span (scratch)
+  std::vector<const uint32_t*> span_values_;  ///< passes 2, 3: the blocks of the span (scratch)
+  /// Per block: pass 1's / pass 2's values hold one below kFar (an obstacle
+  /// within reach), so that passes 2 and 3 skip the blocks far from any.
+  std::vector<uint8_t> finite_x_, finite_xy_;
   // The blocks of one update (local linear indices) and their marks (mark == epoch_: in the list).
   uint32_t epoch_ = 0;
   bool everything_ = false;  ///< this update recomputes the whole window

@@ -70,6 +70,9 @@ DistanceField::DistanceField(const DistanceFieldConfig& config, double resolutio
   along_xy_.assign(n, kFar);
   row_span_.assign(static_cast<size_t>(kBlockCells + 2 * reach_blocks_ * kBlockCells), 0);
   span_blocks_.assign(static_cast<size_t>(2 * reach_blocks_ + 1), nullptr);
+  span_values_.assign(static_cast<size_t>(2 * reach_blocks_ + 1), nullptr);
+  finite_x_.assign(blocks, 0);
+  finite_xy_.assign(blocks, 0);
   for (auto* marks : {&changed_mark_, &mark_x_, &mark_y_, &mark_z_}) marks->assign(blocks, 0);
   for (auto* list : {&changed_, &blocks_x_, &blocks_y_, &blocks_z_}) list->reserve(blocks);
   origin_block_ = -size_blocks_ / 2;
@@ -82,12 +85,13 @@ Eigen::AlignedBox3d DistanceField::window() const {
 }
 
 bool DistanceField::localCell(const Eigen::Vector3d& W_point, Eigen::Vector3i* l) const {
-  if (!W_point.allFinite()) return false;
-  const Eigen::AlignedBox3d box = window();
-  // Outside the box first: the index of a far point would not fit an int.
-  if (!((W_point.array() >= box.min().array()).all() && (W_point.array() <= box.max().array()).all())) return false;
-  *l = (W_point / resolution_m_).array().floor().cast<int>().matrix() - origin_block_ * kBlockCells;
-  return inside(*l);  // a point on the upper faces belongs to the next cell
+  // In cells from the window's lowest corner; compared as doubles first: the
+  // index of a far point (or NaN) would not fit an int.
+  const Eigen::Array3d c =
+      (W_point.array() / resolution_m_).floor() - (origin_block_ * kBlockCells).cast<double>().array();
+  if (!((c >= 0.0).all() && (c < size_cells_.cast<double>().array()).all())) return false;
+  *l = c.cast<int>().matrix();
+  return true;
 }
 
 Eigen::Vector3d DistanceField::centreOf(const Eigen::Vector3i& l) const {
@@ -294,6 +298,7 @@ void DistanceField::alongX(const Eigen::Vector3i& b) {
   }
   uint8_t* span = row_span_.data();   // obstacle flags of positions [-r * 8, (r + 1) * 8) around the block
   const int first = r * kBlockCells;  // the block's first cell in span
+  bool any = false;                   // an obstacle within reach along x
   for (int row = 0; row < kBlockCells * kBlockCells; ++row) {
     for (int i = 0; i < span_blocks; ++i) {
       uint8_t* s = span + i * kBlockCells;
@@ -316,68 +321,99 @@ void DistanceField::alongX(const Eigen::Vector3i& b) {
       if (p < first + kBlockCells) dist[p - first] = std::min(dist[p - first], next - p);
     }
     uint32_t* o = out + row * kBlockCells;
-    for (int x = 0; x < kBlockCells; ++x) o[x] = dist[x] <= d ? static_cast<uint32_t>(dist[x] * dist[x]) : kFar;
+    for (int x = 0; x < kBlockCells; ++x) {
+      o[x] = dist[x] <= d ? static_cast<uint32_t>(dist[x] * dist[x]) : kFar;
+      any = any || dist[x] <= d;
+    }
   }
+  finite_x_[slotOf(b)] = any ? 1 : 0;
 }
 
 namespace {
-/// One row of 8 lanes: acc = min(acc, row + k^2) (vectorises across x).
-inline void minRow(uint32_t* acc, const uint32_t* row, uint32_t k2) {
-  for (int x = 0; x < DistanceField::kBlockCells; ++x) acc[x] = std::min(acc[x], row[x] + k2);
+/// acc = min(acc, values + k^2) over @p n lanes (vectorises).
+template <int n>
+inline void minPlus(uint32_t* acc, const uint32_t* values, uint32_t k2) {
+  for (int i = 0; i < n; ++i) acc[i] = std::min(acc[i], values[i] + k2);
 }
 }  // namespace
 
-// Pass 2: g(x, y) = min over |k| <= reach of pass 1's g(x, y + k) + k^2.
-void DistanceField::alongY(const Eigen::Vector3i& b) {
-  const int d = reach_cells_;
-  const uint32_t outside_value = config_.unknown_is_occupied ? 0u : kFar;
-  const uint32_t outside_row[kBlockCells] = {outside_value, outside_value, outside_value, outside_value,
-                                             outside_value, outside_value, outside_value, outside_value};
-  uint32_t* out = &along_xy_[slotOf(b) * kBlockVolume];
-  for (int z = 0; z < kBlockCells; ++z)
-    for (int y = 0; y < kBlockCells; ++y) {
-      uint32_t acc[kBlockCells];
-      std::fill(acc, acc + kBlockCells, kFar);
-      const int ly = b.y() * kBlockCells + y;
-      for (int k = -d; k <= d; ++k) {
-        const int yy = ly + k;
-        const uint32_t* row = outside_row;
-        if (yy >= 0 && yy < size_cells_.y()) {
-          const Eigen::Vector3i nb(b.x(), yy >> kBlockShift, b.z());
-          row = &along_x_[slotOf(nb) * kBlockVolume +
-                          static_cast<size_t>((z << (2 * kBlockShift)) | ((yy & (kBlockCells - 1)) << kBlockShift))];
-        }
-        minRow(acc, row, static_cast<uint32_t>(k * k));
-      }
-      std::copy(acc, acc + kBlockCells, out + ((z << (2 * kBlockShift)) | (y << kBlockShift)));
+bool DistanceField::gatherSpan(const Eigen::Vector3i& b, int axis, const std::vector<uint32_t>& values,
+                               const std::vector<uint8_t>& finite) {
+  const int r = reach_blocks_;
+  // Unknown outside is an obstacle: the outside's rows hold 0.
+  bool any = config_.unknown_is_occupied && (b[axis] - r < 0 || b[axis] + r >= size_blocks_[axis]);
+  for (int i = 0; i <= 2 * r; ++i) {
+    Eigen::Vector3i n = b;
+    n[axis] += i - r;
+    if (n[axis] < 0 || n[axis] >= size_blocks_[axis]) {
+      span_values_[static_cast<size_t>(i)] = nullptr;
+      continue;
     }
+    const size_t slot = slotOf(n);
+    span_values_[static_cast<size_t>(i)] = &values[slot * kBlockVolume];
+    any = any || finite[slot];
+  }
+  return any;
 }
 
-// Pass 3: along z from pass 2, capped where distances saturate.
-void DistanceField::alongZ(const Eigen::Vector3i& b) {
-  const int d = reach_cells_;
-  const uint32_t outside_value = config_.unknown_is_occupied ? 0u : kFar;
-  const uint32_t outside_row[kBlockCells] = {outside_value, outside_value, outside_value, outside_value,
-                                             outside_value, outside_value, outside_value, outside_value};
-  uint32_t* out = &sq_[slotOf(b) * kBlockVolume];
+// Pass 2: g(x, y) = min over |k| <= reach of pass 1's g(x, y + k) + k^2,
+// each row of 8 cells at once.
+void DistanceField::alongY(const Eigen::Vector3i& b) {
+  const int d = reach_cells_, first = reach_blocks_ * kBlockCells;
+  const size_t slot = slotOf(b);
+  uint32_t* out = &along_xy_[slot * kBlockVolume];
+  if (!gatherSpan(b, 1, along_x_, finite_x_)) {  // no obstacle within reach: nothing to do
+    std::fill(out, out + kBlockVolume, kFar);
+    finite_xy_[slot] = 0;
+    return;
+  }
+  const uint32_t outside = config_.unknown_is_occupied ? 0u : kFar;
+  const uint32_t outside_row[kBlockCells] = {outside, outside, outside, outside, outside, outside, outside, outside};
+  uint32_t any = kFar;
   for (int z = 0; z < kBlockCells; ++z)
     for (int y = 0; y < kBlockCells; ++y) {
       uint32_t acc[kBlockCells];
       std::fill(acc, acc + kBlockCells, kFar);
-      const int lz = b.z() * kBlockCells + z;
       for (int k = -d; k <= d; ++k) {
-        const int zz = lz + k;
-        const uint32_t* row = outside_row;
-        if (zz >= 0 && zz < size_cells_.z()) {
-          const Eigen::Vector3i nb(b.x(), b.y(), zz >> kBlockShift);
-          row = &along_xy_[slotOf(nb) * kBlockVolume +
-                           static_cast<size_t>(((zz & (kBlockCells - 1)) << (2 * kBlockShift)) | (y << kBlockShift))];
-        }
-        minRow(acc, row, static_cast<uint32_t>(k * k));
+        const int yy = first + y + k;  // in the span
+        const uint32_t* block = span_values_[static_cast<size_t>(yy >> kBlockShift)];
+        const uint32_t* row =
+            block ? block + ((z << (2 * kBlockShift)) | ((yy & (kBlockCells - 1)) << kBlockShift)) : outside_row;
+        minPlus<kBlockCells>(acc, row, static_cast<uint32_t>(k * k));
       }
       uint32_t* o = out + ((z << (2 * kBlockShift)) | (y << kBlockShift));
-      for (int x = 0; x < kBlockCells; ++x) o[x] = std::min(acc[x], saturated_sq_);
+      for (int x = 0; x < kBlockCells; ++x) {
+        o[x] = acc[x];
+        any = std::min(any, acc[x]);
+      }
     }
+  finite_xy_[slot] = any < kFar ? 1 : 0;
+}
+
+// Pass 3: along z from pass 2, a layer of 64 cells at once, capped where
+// distances saturate.
+void DistanceField::alongZ(const Eigen::Vector3i& b) {
+  constexpr int kLayer = kBlockCells * kBlockCells;
+  const int d = reach_cells_, first = reach_blocks_ * kBlockCells;
+  uint32_t* out = &sq_[slotOf(b) * kBlockVolume];
+  if (!gatherSpan(b, 2, along_xy_, finite_xy_)) {
+    std::fill(out, out + kBlockVolume, saturated_sq_);
+    return;
+  }
+  uint32_t outside_layer[kLayer];
+  std::fill(outside_layer, outside_layer + kLayer, config_.unknown_is_occupied ? 0u : kFar);
+  for (int z = 0; z < kBlockCells; ++z) {
+    uint32_t acc[kLayer];
+    std::fill(acc, acc + kLayer, kFar);
+    for (int k = -d; k <= d; ++k) {
+      const int zz = first + z + k;
+      const uint32_t* block = span_values_[static_cast<size_t>(zz >> kBlockShift)];
+      minPlus<kLayer>(acc, block ? block + ((zz & (kBlockCells - 1)) << (2 * kBlockShift)) : outside_layer,
+                      static_cast<uint32_t>(k * k));
+    }
+    uint32_t* o = out + z * kLayer;
+    for (int i = 0; i < kLayer; ++i) o[i] = std::min(acc[i], saturated_sq_);
+  }
 }
 
 // --- queries ------------------------------------------------------------------
@@ -395,14 +431,27 @@ DistanceSample DistanceField::sample(const Eigen::Vector3d& W_point) const {
   const uint32_t sq = sq_[index];
   s.distance_m = distanceOf(sq);
   if (sq >= saturated_sq_) return s;  // flat: no gradient
+  const float res = static_cast<float>(resolution_m_);
   for (int a = 0; a < 3; ++a) {
-    // Central differences; one-sided at the window's edges.
-    Eigen::Vector3i lo = l, hi = l;
-    if (l[a] > 0) --lo[a];
-    if (l[a] + 1 < size_cells_[a]) ++hi[a];
-    if (hi[a] == lo[a]) continue;
-    s.gradient[a] = (distanceOf(sq_[cellIndex(hi)]) - distanceOf(sq_[cellIndex(lo)])) /
-                    (static_cast<float>(hi[a] - lo[a]) * static_cast<float>(resolution_m_));
+    // Central differences; one-sided at the window's edges. A neighbour in
+    // the same block is a stride away; across a block face its own index.
+    const int in_block = l[a] & (kBlockCells - 1);
+    const size_t stride = size_t{1} << (a * kBlockShift);
+    float lo = s.distance_m, hi = s.distance_m;
+    float cells = 0.0f;
+    if (l[a] > 0) {
+      Eigen::Vector3i n = l;
+      --n[a];
+      lo = distanceOf(sq_[in_block > 0 ? index - stride : cellIndex(n)]);
+      cells += 1.0f;
+    }
+    if (l[a] + 1 < size_cells_[a]) {
+      Eigen::Vector3i n = l;
+      ++n[a];
+      hi = distanceOf(sq_[in_block < kBlockCells - 1 ? index + stride : cellIndex(n)]);
+      cells += 1.0f;
+    }
+    if (cells > 0.0f) s.gradient[a] = (hi - lo) / (cells * res);
   }
   return s;
 }

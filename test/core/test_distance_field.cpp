@@ -78,6 +78,10 @@ TEST_P(DistanceFieldRandom, EqualsTheBruteForceThroughUpdatesAndMoves) {
                                              {5.3, -5.0, -3.1}, {60.0, 40.0, 5.0}, {58.2, 41.0, 5.0}, {0.1, 0.1, 0.1}};
   size_t checks = 0;
   for (const Eigen::Vector3d& W_vehicle : path) {
+    // The move alone first (no update): the cells that enter are read from
+    // the map, those near the side that left are recomputed.
+    scene.refresh(W_vehicle);
+    EXPECT_TRUE(matchesBruteForce(scene)) << "moved to " << W_vehicle.transpose();
     Eigen::Vector3i first, size;
     windowAndMargin(W_vehicle, &first, &size);
     // Dense enough for obstacles everywhere, sparse enough for distances up to the saturation.
@@ -92,9 +96,9 @@ TEST_P(DistanceFieldRandom, EqualsTheBruteForceThroughUpdatesAndMoves) {
       ASSERT_TRUE(scene.integrate(randomUpdate(&rng, at, Eigen::Vector3i(4, 4, 4), 0.2, 0.3), W_vehicle));
     }
     EXPECT_TRUE(matchesBruteForce(scene)) << "at " << W_vehicle.transpose();
-    checks += 3;
+    checks += 4;
   }
-  EXPECT_EQ(checks, 3 * path.size());
+  EXPECT_EQ(checks, 4 * path.size());
 }
 
 INSTANTIATE_TEST_SUITE_P(UnknownThreadsReach, DistanceFieldRandom,
