@@ -116,11 +116,11 @@ void AccumulatingOcTree::addSiblingsInParts(const std::vector<std::vector<Siblin
     log->per_worker.resize(pool->size());
     for (auto& w : log->per_worker) w.clear();  // keeps their memory
   }
-  // Each worker appends to its own list, each at most what the log may still
-  // take; the lists follow the log's in worker order afterwards.
+  // Each worker appends to its own list, each at most its share of what the
+  // log may still take; the lists follow the log's in worker order afterwards.
   std::vector<char> overflowed(log ? pool->size() : 0, 0);
-  auto record = [&](LeafUpdater* updater, std::vector<CellClassChange>* changes) {
-    if (log) updater->recordClassChanges(changes, occ_prob_thres_log, log->max_changes - log->changes.size());
+  auto record = [&](LeafUpdater* updater, std::vector<CellClassChange>* changes, size_t share) {
+    if (log) updater->recordClassChanges(changes, occ_prob_thres_log, (log->max_changes - log->changes.size()) / share);
   };
   auto countNodes = [&] {  // the nodes the workers created are this tree's
     for (const auto& c : *counters) {
@@ -140,7 +140,7 @@ void AccumulatingOcTree::addSiblingsInParts(const std::vector<std::vector<Siblin
       const size_t p = on_workers[i];
       LeafUpdater updater((*counters)[worker].get(), starts[p].node, kPartDepth, parts[p].front().first,
                           starts[p].created);
-      record(&updater, log ? &log->per_worker[worker] : nullptr);
+      record(&updater, log ? &log->per_worker[worker] : nullptr, pool->size());
       for (const SiblingBlock& b : parts[p]) updater.addSiblings(b.first, b.values);
       if (updater.overflowed()) overflowed[worker] = 1;
     });
@@ -150,7 +150,7 @@ void AccumulatingOcTree::addSiblingsInParts(const std::vector<std::vector<Siblin
   }
   countNodes();
   LeafUpdater updater(this);
-  if (log && !log->overflowed) record(&updater, &log->changes);
+  if (log && !log->overflowed) record(&updater, &log->changes, 1);
   for (size_t p : here)
     for (const SiblingBlock& b : parts[p]) updater.addSiblings(b.first, b.values);
   if (log && updater.overflowed()) log->overflowed = true;

@@ -137,9 +137,13 @@ TEST(DistanceField, ObstaclesAtTheWindowsEdges) {
     encodeGridUpdate(grid, W_vehicle, &update);
     ASSERT_TRUE(scene.integrate(update, W_vehicle));
     EXPECT_TRUE(matchesBruteForce(scene)) << "unknown_is_occupied " << uio;
-    // The corner's neighbour: 1 cell from it; beyond the face: not counted.
+    // The corner's neighbour: 1 cell from the corner (and, unknown being
+    // occupied, from the outside).
     const DistanceSample s = scene.field.sample(BruteForceField(scene.field, scene.map.tree()).centre({1, 0, 0}, kRes));
-    EXPECT_FLOAT_EQ(s.distance_m, uio ? 0.25f : 0.25f);
+    EXPECT_FLOAT_EQ(s.distance_m, 0.25f);
+    // Next to the obstacle one beyond the face: it does not count unless the outside does.
+    const Eigen::Vector3d W_inside((hi.x() + 0.5) * kRes, 2.5 * kRes, 1.5 * kRes);
+    EXPECT_FLOAT_EQ(scene.field.sample(W_inside).distance_m, uio ? 0.25f : 2.0f);  // none within 2 m
   }
 }
 
