@@ -215,6 +215,9 @@ class DistanceField {
   void markRecompute(const Eigen::Vector3i& lo, const Eigen::Vector3i& hi);
   void recompute();
   void alongX(const Eigen::Vector3i& local_block);  // pass 1 into along_x_
+  void alongXScalar(const Eigen::Vector3i& local_block);
+  /// Pass 1 takes a row's span as one 64-bit word up to this reach [blocks].
+  static constexpr int kMaxBitReachBlocks = 3;
   void alongY(const Eigen::Vector3i& local_block);  // pass 2 into along_xy_
   void alongZ(const Eigen::Vector3i& local_block);  // pass 3 into sq_
   /// Points span_values_ at the blocks of @p values within the reach of

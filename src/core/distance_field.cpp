@@ -284,9 +284,70 @@ void DistanceField::recompute() {
   last_updated_cells_ = blocks_z_.size() * kBlockVolume;
 }
 
+namespace {
+/// The obstacle flags of the 8 cells (CellClass bytes) at @p classes as
+/// bits 0..7. kOccupied (2) has bit 1 set; with unknown occupied, every
+/// class but kFree (1) is an obstacle: bit 0 clear.
+inline uint64_t obstacleBits(const uint8_t* classes, bool unknown_is_occupied) {
+  static_assert(static_cast<int>(CellClass::kOccupied) == 2 && static_cast<int>(CellClass::kFree) == 1 &&
+                    static_cast<int>(CellClass::kUnknown) == 0,
+                "the bit tests below");
+  uint64_t v;
+  std::memcpy(&v, classes, sizeof v);
+  constexpr uint64_t kLowBits = 0x0101010101010101ull;
+  const uint64_t flags = unknown_is_occupied ? (~v & kLowBits) : ((v >> 1) & kLowBits);
+  return (flags * 0x0102040810204080ull) >> 56;  // byte i's low bit to bit i
+}
+}  // namespace
+
 // Pass 1: per row of a block, the distance along x to the nearest obstacle
-// within reach (squared), from the row's classes and the reach on both sides.
+// within reach (squared), from the row's obstacle bits and the reach's on
+// both sides: the nearest set bit on each side of each cell.
 void DistanceField::alongX(const Eigen::Vector3i& b) {
+  const int r = reach_blocks_, d = reach_cells_;
+  if (r > kMaxBitReachBlocks) return alongXScalar(b);
+  const bool uio = config_.unknown_is_occupied;
+  uint32_t* out = &along_x_[slotOf(b) * kBlockVolume];
+  // The rows' obstacle bits of the span's blocks, left to right (all or
+  // none outside the window).
+  uint64_t words[kBlockCells * kBlockCells] = {};
+  for (int i = 0; i <= 2 * r; ++i) {
+    const Eigen::Vector3i n(b.x() - r + i, b.y(), b.z());
+    const int shift = i * kBlockCells;
+    if (n.x() < 0 || n.x() >= size_blocks_.x()) {
+      if (uio)
+        for (uint64_t& w : words) w |= uint64_t{0xff} << shift;
+      continue;
+    }
+    const uint8_t* c = &classes_[slotOf(n) * kBlockVolume];
+    for (int row = 0; row < kBlockCells * kBlockCells; ++row)
+      words[row] |= obstacleBits(c + row * kBlockCells, uio) << shift;
+  }
+  const int first = r * kBlockCells;  // the block's first cell in a word
+  bool any = false;                   // an obstacle within reach along x
+  for (int row = 0; row < kBlockCells * kBlockCells; ++row) {
+    const uint64_t w = words[row];
+    uint32_t* o = out + row * kBlockCells;
+    if (w == 0) {
+      std::fill(o, o + kBlockCells, kFar);
+      continue;
+    }
+    for (int x = 0; x < kBlockCells; ++x) {
+      const int p = first + x;
+      int dist = d + 1;
+      const uint64_t left = w & ((uint64_t{2} << p) - 1);  // positions <= p
+      if (left) dist = p - (63 - __builtin_clzll(left));
+      const uint64_t right = w >> p;
+      if (right) dist = std::min(dist, __builtin_ctzll(right));
+      o[x] = dist <= d ? static_cast<uint32_t>(dist * dist) : kFar;
+      any = any || dist <= d;
+    }
+  }
+  finite_x_[slotOf(b)] = any ? 1 : 0;
+}
+
+// Pass 1 for reaches beyond kMaxBitReachBlocks: a scan of the row's flags.
+void DistanceField::alongXScalar(const Eigen::Vector3i& b) {
   const int r = reach_blocks_, d = reach_cells_;
   const uint8_t outside = config_.unknown_is_occupied ? 1 : 0;
   uint32_t* out = &along_x_[slotOf(b) * kBlockVolume];
@@ -333,7 +394,12 @@ namespace {
 /// acc = min(acc, values + k^2) over @p n lanes (vectorises).
 template <int n>
 inline void minPlus(uint32_t* acc, const uint32_t* values, uint32_t k2) {
-  for (int i = 0; i < n; ++i) acc[i] = std::min(acc[i], values[i] + k2);
+  // As signed lanes: every value stays below 2^31, and SSE2 compares signed
+  // 32-bit lanes only (unsigned ones cost two more instructions each).
+  int32_t* a = reinterpret_cast<int32_t*>(acc);
+  const int32_t* v = reinterpret_cast<const int32_t*>(values);
+  const int32_t k = static_cast<int32_t>(k2);
+  for (int i = 0; i < n; ++i) a[i] = std::min(a[i], v[i] + k);
 }
 }  // namespace
 

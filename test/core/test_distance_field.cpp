@@ -107,6 +107,26 @@ INSTANTIATE_TEST_SUITE_P(UnknownThreadsReach, DistanceFieldRandom,
                                            std::make_tuple(false, 1, 2.0),   // the default reach: 7 cells
                                            std::make_tuple(true, 2, 2.6)));  // a reach beyond one block: 10 cells
 
+// A reach beyond what pass 1 takes as one 64-bit word (6.5 m: 26 cells, 4
+// blocks), in a window smaller than the reach: its scan, against the brute force.
+TEST(DistanceField, LongReachEqualsTheBruteForce) {
+  DistanceFieldConfig config = smallWindow(false, 6.5);
+  config.window_xy_m = 4.0;
+  config.window_z_m = 2.0;
+  for (bool uio : {false, true}) {
+    config.unknown_is_occupied = uio;
+    FieldScene scene(config);
+    std::mt19937 rng(7);
+    const Eigen::Vector3d W_vehicle(0.1, 0.1, 0.1);
+    ASSERT_TRUE(scene.integrate(
+        randomUpdate(&rng, Eigen::Vector3i(-12, -12, -6), Eigen::Vector3i(24, 24, 12), 0.05, 0.002), W_vehicle));
+    EXPECT_TRUE(matchesBruteForce(scene)) << "unknown_is_occupied " << uio;
+    ASSERT_TRUE(scene.integrate(randomUpdate(&rng, Eigen::Vector3i(-4, -4, -2), Eigen::Vector3i(8, 8, 4), 0.1, 0.05),
+                                W_vehicle));
+    EXPECT_TRUE(matchesBruteForce(scene)) << "unknown_is_occupied " << uio;
+  }
+}
+
 // Obstacles on the window's faces, edges and corners and just beyond them, in
 // a map known everywhere: those beyond do not count (unknown is not occupied)
 // or the whole outside does (unknown is occupied), as the brute force says.
