@@ -262,6 +262,7 @@ class DistanceField {
   std::vector<uint8_t> row_span_;   ///< pass 1: one row's obstacle flags with the reach on both sides (scratch)
   std::vector<const uint8_t*> span_blocks_;   ///< pass 1: the class blocks of that span (scratch)
   std::vector<const uint32_t*> span_values_;  ///< passes 2, 3: the blocks of the span (scratch)
+  std::vector<const uint32_t*> layers_;       ///< pass 3: the layers z - reach .. z + reach (scratch)
   /// Per block: pass 1's / pass 2's values hold one below kFar (an obstacle
   /// within reach), so that passes 2 and 3 skip the blocks far from any.
   std::vector<uint8_t> finite_x_, finite_xy_;

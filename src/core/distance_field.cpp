@@ -71,6 +71,7 @@ DistanceField::DistanceField(const DistanceFieldConfig& config, double resolutio
   row_span_.assign(static_cast<size_t>(kBlockCells + 2 * reach_blocks_ * kBlockCells), 0);
   span_blocks_.assign(static_cast<size_t>(2 * reach_blocks_ + 1), nullptr);
   span_values_.assign(static_cast<size_t>(2 * reach_blocks_ + 1), nullptr);
+  layers_.assign(static_cast<size_t>(2 * reach_cells_ + 1), nullptr);
   finite_x_.assign(blocks, 0);
   finite_xy_.assign(blocks, 0);
   for (auto* marks : {&changed_mark_, &mark_x_, &mark_y_, &mark_z_}) marks->assign(blocks, 0);
@@ -456,29 +457,36 @@ void DistanceField::alongY(const Eigen::Vector3i& b) {
   finite_xy_[slot] = any < kFar ? 1 : 0;
 }
 
-// Pass 3: along z from pass 2, a layer of 64 cells at once, capped where
-// distances saturate.
+// Pass 3: along z from pass 2, 8 cells (a row) at a time as pass 2, capped
+// where distances saturate.
 void DistanceField::alongZ(const Eigen::Vector3i& b) {
-  constexpr int kLayer = kBlockCells * kBlockCells;
   const int d = reach_cells_, first = reach_blocks_ * kBlockCells;
   uint32_t* out = &sq_[slotOf(b) * kBlockVolume];
   if (!gatherSpan(b, 2, along_xy_, finite_xy_)) {
     std::fill(out, out + kBlockVolume, saturated_sq_);
     return;
   }
-  uint32_t outside_layer[kLayer];
-  std::fill(outside_layer, outside_layer + kLayer, config_.unknown_is_occupied ? 0u : kFar);
+  const uint32_t outside = config_.unknown_is_occupied ? 0u : kFar;
+  const uint32_t outside_layer[kBlockCells * kBlockCells] = {};
+  static_assert(kBlockCells * kBlockCells == 64, "one layer");
+  uint32_t far_layer[kBlockCells * kBlockCells];
+  std::fill(far_layer, far_layer + kBlockCells * kBlockCells, kFar);
   for (int z = 0; z < kBlockCells; ++z) {
-    uint32_t acc[kLayer];
-    std::fill(acc, acc + kLayer, kFar);
+    // The layers z + k, k in [-d, d]: pass 2's, or the outside's.
     for (int k = -d; k <= d; ++k) {
       const int zz = first + z + k;
       const uint32_t* block = span_values_[static_cast<size_t>(zz >> kBlockShift)];
-      minPlus<kLayer>(acc, block ? block + ((zz & (kBlockCells - 1)) << (2 * kBlockShift)) : outside_layer,
-                      static_cast<uint32_t>(k * k));
+      layers_[static_cast<size_t>(k + d)] =
+          block ? block + ((zz & (kBlockCells - 1)) << (2 * kBlockShift)) : (outside == 0u ? outside_layer : far_layer);
     }
-    uint32_t* o = out + z * kLayer;
-    for (int i = 0; i < kLayer; ++i) o[i] = std::min(acc[i], saturated_sq_);
+    for (int row = 0; row < kBlockCells * kBlockCells; row += kBlockCells) {
+      uint32_t acc[kBlockCells];
+      std::fill(acc, acc + kBlockCells, kFar);
+      for (int k = -d; k <= d; ++k)
+        minPlus<kBlockCells>(acc, layers_[static_cast<size_t>(k + d)] + row, static_cast<uint32_t>(k * k));
+      uint32_t* o = out + z * kBlockCells * kBlockCells + row;
+      for (int x = 0; x < kBlockCells; ++x) o[x] = std::min(acc[x], saturated_sq_);
+    }
   }
 }
 
