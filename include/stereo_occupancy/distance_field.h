@@ -209,6 +209,14 @@ class DistanceField {
   void readAll(const octomap::OcTree& map);
   /// Sets the local blocks [lo, hi) unknown, reads them from @p map, marks them changed.
   void readBlocks(const octomap::OcTree& map, const Eigen::Vector3i& lo, const Eigen::Vector3i& hi);
+  /// Marks the blocks [lo, hi) that entered: computed, and the ones that
+  /// differ from the outside (differsFromOutside()) changed.
+  void markEntered(const Eigen::Vector3i& lo, const Eigen::Vector3i& hi);
+  /// The block in @p slot holds a cell whose obstacle status is not the
+  /// outside's (an obstacle; a free cell if unknown is occupied).
+  bool differsFromOutside(size_t slot) const;
+  /// The slot of a global block index (inside the window or not).
+  size_t globalSlot(const Eigen::Vector3i& global_block) const;
   void applyChanges(const std::vector<CellClassChange>& changes);
   void markChanged(const Eigen::Vector3i& local_block);
   /// Marks the local blocks [lo, hi) for recomputation (without dilation).

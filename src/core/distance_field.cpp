@@ -147,7 +147,39 @@ Eigen::Vector3i DistanceField::wantedOrigin(const Eigen::Vector3d& W_vehicle) co
 }
 
 void DistanceField::moveTo(const octomap::OcTree& map, const Eigen::Vector3i& origin_block) {
-  const Eigen::Vector3i shift = origin_block - origin_block_;
+  const Eigen::Vector3i old_origin = origin_block_;
+  const Eigen::Vector3i shift = origin_block - old_origin;
+  // The cells within reach of the side that leaves: their nearest obstacle
+  // may leave with it (or, unknown being occupied, the outside comes
+  // nearer), unless the blocks that leave were what the outside counts as.
+  // Decided per column of blocks that leave, before the entering blocks reuse their slots.
+  for (int a = 0; a < 3; ++a) {
+    if (shift[a] == 0) continue;
+    const int u = (a + 1) % 3, v = (a + 2) % 3, r = reach_blocks_, n = size_blocks_[a];
+    const int band_lo = shift[a] > 0 ? 0 : std::max(0, n - r), band_hi = shift[a] > 0 ? std::min(r, n) : n;
+    // The global layers that leave within reach of the new edge.
+    const int leave_lo = shift[a] > 0 ? origin_block[a] - r : origin_block[a] + n;
+    // Columns beyond the new window's sides too: a block that leaves there
+    // (a move along two axes) may still be within reach of the band.
+    Eigen::Vector3i column;
+    for (column[v] = -r; column[v] < size_blocks_[v] + r; ++column[v])
+      for (column[u] = -r; column[u] < size_blocks_[u] + r; ++column[u]) {
+        bool differs = false;
+        for (int k = 0; k < r && !differs; ++k) {
+          Eigen::Vector3i g = origin_block + column;
+          g[a] = leave_lo + k;
+          const Eigen::Vector3i old_local = g - old_origin;
+          if ((old_local.array() < 0).any() || (old_local.array() >= size_blocks_.array()).any()) continue;
+          differs = differsFromOutside(globalSlot(g));
+        }
+        if (!differs) continue;
+        // Its obstacles reach the band's blocks of the columns within reach.
+        Eigen::Vector3i b;
+        for (b[v] = std::max(0, column[v] - r); b[v] <= std::min(size_blocks_[v] - 1, column[v] + r); ++b[v])
+          for (b[u] = std::max(0, column[u] - r); b[u] <= std::min(size_blocks_[u] - 1, column[u] + r); ++b[u])
+            for (b[a] = band_lo; b[a] < band_hi; ++b[a]) mark(linearOfBlock(b), epoch_, &mark_z_, &blocks_z_);
+      }
+  }
   origin_block_ = origin_block;
   for (int a = 0; a < 3; ++a) ring_phase_[a] = positiveMod(origin_block_[a], size_blocks_[a]);
   // The blocks that enter: a slab per axis that moved, each without the
@@ -165,17 +197,25 @@ void DistanceField::moveTo(const octomap::OcTree& map, const Eigen::Vector3i& or
     }
     readBlocks(map, lo, hi);
   }
-  // The cells within reach of the side that left: their nearest obstacle
-  // may have left (or, unknown being occupied, the edge came nearer).
-  for (int a = 0; a < 3; ++a) {
-    if (shift[a] == 0) continue;
-    Eigen::Vector3i lo = Eigen::Vector3i::Zero(), hi = size_blocks_;
-    if (shift[a] > 0)
-      hi[a] = std::min(reach_blocks_, size_blocks_[a]);
-    else
-      lo[a] = std::max(0, size_blocks_[a] - reach_blocks_);
-    markRecompute(lo, hi);
+}
+
+size_t DistanceField::globalSlot(const Eigen::Vector3i& global_block) const {
+  return static_cast<size_t>(positiveMod(global_block.x(), size_blocks_.x())) +
+         static_cast<size_t>(size_blocks_.x()) * (positiveMod(global_block.y(), size_blocks_.y()) +
+                                                  size_blocks_.y() * positiveMod(global_block.z(), size_blocks_.z()));
+}
+
+bool DistanceField::differsFromOutside(size_t slot) const {
+  // Eight classes at a time: kOccupied (2) has bit 1, kFree (1) bit 0.
+  const uint8_t* c = &classes_[slot * kBlockVolume];
+  constexpr uint64_t kLowBits = 0x0101010101010101ull;
+  for (int i = 0; i < kBlockVolume; i += 8) {
+    uint64_t w;
+    std::memcpy(&w, c + i, sizeof w);
+    // Outside is an obstacle (unknown occupied): a free cell differs; else an occupied one.
+    if (config_.unknown_is_occupied ? (w & kLowBits) : ((w >> 1) & kLowBits)) return true;
   }
+  return false;
 }
 
 void DistanceField::readAll(const octomap::OcTree& map) {
@@ -190,7 +230,6 @@ void DistanceField::readBlocks(const octomap::OcTree& map, const Eigen::Vector3i
       for (int x = lo.x(); x < hi.x(); ++x) {
         const Eigen::Vector3i b(x, y, z);
         std::memset(&classes_[slotOf(b) * kBlockVolume], static_cast<int>(CellClass::kUnknown), kBlockVolume);
-        if (!everything_) markChanged(b);
       }
   // The box's keys, cut to the key range (beyond it the map holds nothing).
   const Eigen::Vector3i g_lo = (origin_block_ + lo) * kBlockCells;
@@ -219,6 +258,23 @@ void DistanceField::readBlocks(const octomap::OcTree& map, const Eigen::Vector3i
       for (l.y() = from.y(); l.y() <= to.y(); ++l.y())
         for (l.x() = from.x(); l.x() <= to.x(); ++l.x()) classes_[cellIndex(l)] = cell_class;
   }
+  markEntered(lo, hi);
+}
+
+void DistanceField::markEntered(const Eigen::Vector3i& lo, const Eigen::Vector3i& hi) {
+  if (everything_) return;
+  // A block that entered is computed; only one that holds what the outside
+  // did not (an obstacle, or with unknown occupied a free cell) can change
+  // its neighbours' distances.
+  for (int z = lo.z(); z < hi.z(); ++z)
+    for (int y = lo.y(); y < hi.y(); ++y)
+      for (int x = lo.x(); x < hi.x(); ++x) {
+        const Eigen::Vector3i b(x, y, z);
+        if (differsFromOutside(slotOf(b)))
+          markChanged(b);
+        else
+          mark(linearOfBlock(b), epoch_, &mark_z_, &blocks_z_);
+      }
 }
 
 void DistanceField::applyChanges(const std::vector<CellClassChange>& changes) {

@@ -107,6 +107,39 @@ INSTANTIATE_TEST_SUITE_P(UnknownThreadsReach, DistanceFieldRandom,
                                            std::make_tuple(false, 1, 2.0),   // the default reach: 7 cells
                                            std::make_tuple(true, 2, 2.6)));  // a reach beyond one block: 10 cells
 
+// Moves through a map of few obstacles (most blocks that enter or leave
+// hold none, so only the columns near the ones that do are recomputed):
+// single blocks along each axis, diagonals across two and three axes, back
+// and forth, each alone against the brute force.
+TEST(DistanceField, MovesAmongFewObstacles) {
+  for (bool uio : {false, true}) {
+    DistanceFieldConfig config = smallWindow(uio, 1.0);
+    config.window_xy_m = 16.0;  // 8 x 8 x 2 blocks
+    FieldScene scene(config);
+    std::mt19937 rng(13);
+    // Known everywhere the window goes, but for a few unknown cells.
+    ASSERT_TRUE(scene.integrate(
+        randomUpdate(&rng, Eigen::Vector3i(-60, -60, -30), Eigen::Vector3i(120, 120, 60), 0.0002, 0.0002),
+        Eigen::Vector3d(0.1, 0.1, 0.1)));
+    EXPECT_TRUE(matchesBruteForce(scene));
+    const std::vector<Eigen::Vector3d> path = {{2.3, 0.1, 0.1},    {2.3, 2.4, 0.1},   {4.5, 4.6, 0.1},
+                                               {4.5, 4.6, 2.3},    {6.8, 2.2, -0.1},  {2.1, -2.3, -2.4},
+                                               {-0.2, -4.5, -2.4}, {-4.6, -0.2, 2.2}, {0.1, 0.1, 0.1}};
+    for (const Eigen::Vector3d& W_vehicle : path) {
+      const Eigen::Vector3d before = scene.field.window().min();
+      scene.refresh(W_vehicle);
+      EXPECT_NE(scene.field.window().min(), before) << "no move to " << W_vehicle.transpose();
+      EXPECT_TRUE(matchesBruteForce(scene)) << "uio " << uio << " at " << W_vehicle.transpose();
+      // One block along x among few obstacles: the slab that entered (8 x 2
+      // blocks) and at most one more layer of blocks, not its neighbours'
+      // layer and the band that every block that enters and leaves would
+      // take (3 layers); unless unknown is occupied (every known block then
+      // differs from the outside).
+      if (!uio && W_vehicle == path.front()) EXPECT_LE(scene.field.lastUpdatedCells(), 2u * 16u * 512u);
+    }
+  }
+}
+
 // A reach beyond what pass 1 takes as one 64-bit word (6.5 m: 26 cells, 4
 // blocks), in a window smaller than the reach: its scan, against the brute force.
 TEST(DistanceField, LongReachEqualsTheBruteForce) {
