@@ -140,6 +140,27 @@ TEST(DistanceField, MovesAmongFewObstacles) {
   }
 }
 
+// A move along x and y at once: one obstacle in the block that leaves at the
+// corner (beyond both new faces), no other near: the corner's cells forget it.
+TEST(DistanceField, DiagonalMoveForgetsTheCornerThatLeft) {
+  DistanceFieldConfig config = smallWindow(false, 1.0);
+  config.window_xy_m = 16.0;  // blocks -4 .. 3 around the origin
+  FieldScene scene(config);
+  LocalGrid grid;
+  grid.reset(Eigen::Vector3i(-40, -40, -10), Eigen::Vector3i(80, 80, 20), kRes);
+  std::fill(grid.data(), grid.data() + grid.numCells(), -2.0f);
+  grid.at(15, 15, 10) = 2.0f;  // cell (-25, -25, 0): the corner of block (-4, -4, 0) nearest the origin
+  GridUpdate update;
+  encodeGridUpdate(grid, Eigen::Vector3d(0.1, 0.1, 0.1), &update);
+  ASSERT_TRUE(scene.integrate(update, Eigen::Vector3d(0.1, 0.1, 0.1)));
+  EXPECT_TRUE(matchesBruteForce(scene));
+  EXPECT_FLOAT_EQ(scene.field.sample(Eigen::Vector3d(-22.5, -22.5, 0.5) * kRes).distance_m, std::sqrt(8.0f) * 0.25f);
+  scene.refresh(Eigen::Vector3d(2.3, 2.3, 0.1));  // one block along x and y
+  EXPECT_NEAR(scene.field.window().min().x(), -24 * kRes, 1e-9);
+  EXPECT_TRUE(matchesBruteForce(scene));
+  EXPECT_FLOAT_EQ(scene.field.sample(Eigen::Vector3d(-22.5, -22.5, 0.5) * kRes).distance_m, 1.0f);
+}
+
 // A reach beyond what pass 1 takes as one 64-bit word (6.5 m: 26 cells, 4
 // blocks), in a window smaller than the reach: its scan, against the brute force.
 TEST(DistanceField, LongReachEqualsTheBruteForce) {
