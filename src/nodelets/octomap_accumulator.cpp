@@ -2,8 +2,9 @@
 // published for visualisation and saved on request.
 //
 // ROS glue only: the fusion is the mapping pipeline's MapFusion (the core's
-// MapAccumulator), the outputs are MapPublisher's, the files MapSaver's; the
-// nodelet subscribes, serves reset and clear_bbx, and reports.
+// MapAccumulator), the outputs are MapPublisher's, the files MapSaver's, the
+// distance field's services and slice DistanceFieldServer's; the nodelet
+// subscribes, serves reset and clear_bbx, and reports.
 
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <nodelet/nodelet.h>
@@ -17,6 +18,7 @@
 #include <string>
 
 #include "stereo_occupancy/BoundingBoxQuery.h"
+#include "stereo_occupancy/ros/distance_field_server.h"
 #include "stereo_occupancy/ros/map_publisher.h"
 #include "stereo_occupancy/ros/map_saver.h"
 #include "stereo_occupancy/ros/mapping_pipeline.h"
@@ -38,6 +40,8 @@ class OctomapAccumulator : public nodelet::Nodelet {
   void onInit() override;
   /// Builds the map (from map_file if given); false, logged, if it cannot start.
   bool startMap();
+  /// Brings the distance field (if any) up to date, under mutex_; false, logged, if that failed.
+  void updateField();
   void updateCallback(const ros::MessageEvent<const OccupancyUpdate>& event);
   bool clearBox(BoundingBoxQuery::Request& request, BoundingBoxQuery::Response&);
   bool reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
@@ -53,8 +57,9 @@ class OctomapAccumulator : public nodelet::Nodelet {
   std::string last_problem_;
 
   // Declared after the map: destroyed (their callbacks ended) before it.
-  std::unique_ptr<MapSaver> saver_;          ///< files, database, checkpoints
-  std::unique_ptr<MapPublisher> publisher_;  ///< the map's topics and GetOctomap services
+  std::unique_ptr<DistanceFieldServer> field_;  ///< the planners' distance field; null with distance_field off
+  std::unique_ptr<MapSaver> saver_;             ///< files, database, checkpoints
+  std::unique_ptr<MapPublisher> publisher_;     ///< the map's topics and GetOctomap services
   ros::Subscriber update_sub_;
   ros::ServiceServer reset_srv_, clear_bbx_srv_;
   ros::Timer diagnostics_timer_;
@@ -76,6 +81,17 @@ void OctomapAccumulator::onInit() {
   if (!params_.saving.save_dir.empty()) saver_->openDatabase();
   publisher_ = std::make_unique<MapPublisher>(params_.publisher, params_.map, fusion_.get(), &mutex_, getName());
   publisher_->advertise(nh);
+  if (params_.distance.field.enabled) {
+    try {
+      field_ = std::make_unique<DistanceFieldServer>(params_.distance, params_.map.resolution_m, fusion_.get(), &mutex_,
+                                                     getName());
+    } catch (const std::exception& e) {  // the config was validated: bad_alloc for a huge window
+      NODELET_FATAL("%s: cannot build the distance field: %s; OctomapAccumulator does not start", getName().c_str(),
+                    e.what());
+      return;
+    }
+    field_->advertise(nh, pnh, params_.publisher.publish_rate_hz);
+  }
   clear_bbx_srv_ = pnh.advertiseService("clear_bbx", &OctomapAccumulator::clearBox, this);
   // A queue deep enough to hold the updates that arrive while a large map is
   // published; what still overflows shows as a gap in the mappers' sequence
@@ -98,6 +114,24 @@ void OctomapAccumulator::onInit() {
       "saving to '%s'",
       params_.map.resolution_m, params_.world_frame.empty() ? "(the first update's)" : params_.world_frame.c_str(),
       params_.map.max_extent_m, beyond.c_str(), save_dir.empty() ? "(nowhere)" : save_dir.c_str());
+  if (field_) {
+    const DistanceFieldConfig& field = params_.distance.field;
+    NODELET_INFO(
+        "distance field: %.0f x %.0f x %.0f m around the vehicle, distances up to %.2f m; services %s/distance, "
+        "check_path, cast_ray; planners in this manager: DistanceFieldRegistry::find(\"%s\")",
+        field.window_xy_m, field.window_xy_m, field.window_z_m, field.max_distance_m, pnh.getNamespace().c_str(),
+        getName().c_str());
+  }
+}
+
+void OctomapAccumulator::updateField() {
+  if (!field_) return;
+  try {
+    field_->update();
+  } catch (const std::exception& e) {  // bad_alloc: the map goes on; the next update reads the window again
+    last_problem_ = std::string("distance field update failed: ") + e.what();
+    NODELET_ERROR_THROTTLE(kWarnThrottleS, "%s", last_problem_.c_str());
+  }
 }
 
 bool OctomapAccumulator::startMap() {
@@ -121,12 +155,16 @@ OctomapAccumulator::~OctomapAccumulator() {
   if (!fusion_times_.empty()) {
     // One line for scripts, on stderr (rosconsole may be gone at shutdown).
     const TimeStatistics fusion = fusion_times_.statistics();
+    // The field's update is timed apart from the fusion: its own columns (0 without the field).
+    const TimeStatistics field = field_ ? field_->times().statistics() : TimeStatistics();
     std::fprintf(stderr,
                  "OctomapAccumulator summary: updates_received=%lu updates_refused=%lu updates_lost=%lu "
-                 "fusion_ms_median=%.3f fusion_ms_p99=%.3f fusion_ms_max=%.3f\n",
+                 "fusion_ms_median=%.3f fusion_ms_p99=%.3f fusion_ms_max=%.3f distance_field_ms_median=%.3f "
+                 "distance_field_ms_p99=%.3f distance_field_ms_max=%.3f\n",
                  static_cast<unsigned long>(fusion_->counters().received),
                  static_cast<unsigned long>(fusion_->counters().refused),
-                 static_cast<unsigned long>(fusion_->counters().lost), fusion.median_ms, fusion.p99_ms, fusion.max_ms);
+                 static_cast<unsigned long>(fusion_->counters().lost), fusion.median_ms, fusion.p99_ms, fusion.max_ms,
+                 field.median_ms, field.p99_ms, field.max_ms);
   }
   if (saver_) saver_->saveOnShutdown(lock);
 }
@@ -165,6 +203,7 @@ void OctomapAccumulator::updateCallback(const ros::MessageEvent<const OccupancyU
     return;
   }
   fusion_times_.stop(start);
+  updateField();  // timed on its own (DistanceFieldServer::times())
   if (!frame_chosen) NODELET_INFO("the map is in frame '%s' (the first update's)", fusion_->frameId().c_str());
   publisher_->mapChanged();
   const bool trim = fusion_->mission().takeFreedMemory();
@@ -186,9 +225,11 @@ bool OctomapAccumulator::clearBox(BoundingBoxQuery::Request& request, BoundingBo
   } catch (const std::exception& e) {  // bad_alloc for a huge box: nothing may leave a callback
     NODELET_ERROR("clear_bbx failed: %s", e.what());
     publisher_->mapChanged();
+    updateField();
     return false;
   }
   publisher_->mapChanged();
+  updateField();
   NODELET_INFO("clear_bbx: cleared %lu occupied cells in [%.2f, %.2f, %.2f] .. [%.2f, %.2f, %.2f]",
                static_cast<unsigned long>(cleared), lo.x(), lo.y(), lo.z(), hi.x(), hi.y(), hi.z());
   return true;
@@ -198,6 +239,7 @@ bool OctomapAccumulator::reset(std_srvs::Empty::Request&, std_srvs::Empty::Respo
   std::lock_guard<std::mutex> lock(mutex_);
   fusion_->reset();
   publisher_->mapChanged();
+  updateField();
   NODELET_INFO("map reset");
   return true;
 }
@@ -237,6 +279,15 @@ void OctomapAccumulator::diagnose(diagnostic_updater::DiagnosticStatusWrapper& s
   status.add("updates fused since last report", window.count);
   status.add("fusion time p50 since last report [ms]", window.median_ms);
   status.add("fusion time p99 since last report [ms]", window.p99_ms);
+  if (field_) {
+    const TimeStatistics field = field_->times().takeWindow();
+    status.add("distance field updates since last report", field.count);
+    status.add("distance field update p50 since last report [ms]", field.median_ms);
+    status.add("distance field update p99 since last report [ms]", field.p99_ms);
+    status.add("distance field last update [ms]", field_->times().lastMs());
+    status.add("distance field max update [ms]", field_->times().maxMs());
+    status.add("distance field cells recomputed (last update)", field_->lastUpdatedCells());
+  }
 }
 
 }  // namespace stereo_occupancy

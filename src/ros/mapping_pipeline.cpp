@@ -201,6 +201,7 @@ bool MapFusion::fuse(const OccupancyUpdate& msg, std::string* why, const std::st
   fusion.stop();
   if (frame_id_.empty()) frame_id_ = msg.header.frame_id;  // world_frame "": the first update's, from then on
   last_stamp_ = msg.header.stamp;
+  last_sensor_origin_ = Eigen::Vector3d(msg.sensor_origin.x, msg.sensor_origin.y, msg.sensor_origin.z);
   // Pruning follows the updates' time, so that a replay prunes where the flight did.
   if (last_prune_.isZero() || last_stamp_ < last_prune_) last_prune_ = last_stamp_;
   if ((last_stamp_ - last_prune_).toSec() > params_.prune_period_s) {
@@ -223,6 +224,14 @@ void MapFusion::countLost(const OccupancyUpdate& msg, const std::string& publish
   last = sequence;
 }
 
-void MapFusion::reset() { mission_.reset(); }
+void MapFusion::reset() {
+  mission_.reset();
+  if (record_class_changes_) mission_.live().recordClassChanges(true);
+}
+
+void MapFusion::load(const std::string& path) {
+  mission_.load(path);
+  if (record_class_changes_) mission_.live().recordClassChanges(true);
+}
 
 }  // namespace stereo_occupancy

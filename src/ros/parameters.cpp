@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <set>
+#include <sstream>
 #include <type_traits>
 
 namespace stereo_occupancy {
@@ -26,7 +27,35 @@ bool DisparityMapperParameters::isValid(std::string* why) const {
 bool OctomapAccumulatorParameters::isValid(std::string* why) const {
   if (!parametersInRange(*this, why) || !saving.isValid(why)) return false;
   if (!map_file.empty() && world_frame.empty()) return fail(why, "a map_file needs a world_frame (its frame)");
-  return publisher.isValid(why) && map.isValid(why);
+  return publisher.isValid(why) && map.isValid(why) && distance.isValid(why);
+}
+
+bool parseWaypoints(const std::string& text, std::vector<Eigen::Vector3d>* W_waypoints, std::string* why) {
+  W_waypoints->clear();
+  std::stringstream waypoints(text);
+  for (std::string one; std::getline(waypoints, one, ';');) {
+    if (one.find_first_not_of(" \t\n") == std::string::npos) continue;  // a trailing ';'
+    for (char& c : one)
+      if (c == ',') c = ' ';
+    std::istringstream numbers(one);
+    Eigen::Vector3d p;
+    std::string rest;
+    if (!(numbers >> p.x() >> p.y() >> p.z()) || (numbers >> rest))
+      return fail(why, "waypoints: '" + one + "' is not three numbers x y z");
+    if (!p.allFinite()) return fail(why, "waypoints: '" + one + "' is not finite");
+    if (W_waypoints->size() >= DistanceField::kMaxWaypoints)
+      return fail(why, "waypoints: more than " + std::to_string(DistanceField::kMaxWaypoints));
+    W_waypoints->push_back(p);
+  }
+  if (W_waypoints->empty()) return fail(why, "waypoints: none given ('x y z; x y z; ...')");
+  return true;
+}
+
+bool PathWatcherParameters::isValid(std::string* why) const {
+  if (accumulator.empty()) return fail(why, "accumulator must name the accumulator nodelet");
+  if (!parametersInRange(*this, why)) return false;
+  std::vector<Eigen::Vector3d> parsed;
+  return parseWaypoints(waypoints, &parsed, why);
 }
 
 namespace {
@@ -203,6 +232,11 @@ bool loadParameters(const ros::NodeHandle& nh, DisparityMapperParameters* p, std
 }
 
 bool loadParameters(const ros::NodeHandle& nh, OctomapAccumulatorParameters* p, std::string* why) {
+  ServerReader source{nh};
+  return readParameters(source, p, why);
+}
+
+bool loadParameters(const ros::NodeHandle& nh, PathWatcherParameters* p, std::string* why) {
   ServerReader source{nh};
   return readParameters(source, p, why);
 }

@@ -21,6 +21,7 @@
 
 #include "stereo_occupancy/OccupancyUpdate.h"
 #include "stereo_occupancy/disparity_drawer.h"
+#include "stereo_occupancy/distance_field.h"
 #include "stereo_occupancy/map_accumulator.h"
 #include "stereo_occupancy/ros/parameters.h"
 #include "stereo_occupancy/stage_times.h"
@@ -153,7 +154,7 @@ class MapFusion {
   void reset();
   /// Starts over from the map in @p path (MapAccumulator::load).
   /// @throws std::runtime_error; the map is then unchanged.
-  void load(const std::string& path) { mission_.load(path); }
+  void load(const std::string& path);
   /// MapAccumulator::takeChangedBlocks() and markAllChanged(): what the outputs must send again.
   std::vector<MapAccumulator::BlockIndex> takeChangedBlocks(bool* all) {
     return mission_.live().takeChangedBlocks(all);
@@ -164,6 +165,16 @@ class MapFusion {
   size_t clearBox(const Eigen::Vector3d& W_min, const Eigen::Vector3d& W_max) {
     return mission_.clearBox(W_min, W_max);
   }
+  /// Turns on the live map's class-change recording (MapAccumulator::recordClassChanges), kept
+  /// across reset() and load(): for the distance field (ros/distance_field_server.h).
+  void recordClassChanges() {
+    record_class_changes_ = true;
+    mission_.live().recordClassChanges(true);
+  }
+  /// MapAccumulator::takeClassChanges(): the cells whose class the fusion changed since the last call.
+  std::vector<CellClassChange> takeClassChanges(bool* all) { return mission_.live().takeClassChanges(all); }
+  /// The camera centre of the last fused update, map frame [m] (the vehicle's position).
+  const Eigen::Vector3d& lastSensorOrigin() const { return last_sensor_origin_; }
   /// The map's frame: world_frame, or (world_frame "") the first fused update's; "" before it.
   const std::string& frameId() const { return frame_id_; }
   /// The stamp of the last fused update.
@@ -180,6 +191,8 @@ class MapFusion {
   MissionMap mission_;
   std::string frame_id_;
   ros::Time last_stamp_;
+  Eigen::Vector3d last_sensor_origin_ = Eigen::Vector3d::Zero();
+  bool record_class_changes_ = false;
   ros::Time last_prune_;  ///< stamp of the update at the last prune
   FusionCounters counters_;
   StageTimes* stage_times_ = nullptr;              ///< setStageTimes()

@@ -10,9 +10,11 @@
 #include <map>
 #include <set>
 #include <string>
+#include <vector>
 
 #include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/map_accumulator.h"
+#include "stereo_occupancy/ros/distance_field_server.h"
 #include "stereo_occupancy/ros/map_publisher.h"
 #include "stereo_occupancy/ros/map_saver.h"
 #include "stereo_occupancy/stereo_camera_model.h"
@@ -67,11 +69,12 @@ struct OctomapAccumulatorParameters {
   /// The map's frame: updates in any other frame are refused; "": the first update's.
   std::string world_frame = "map";
   MapAccumulatorConfig map;
-  MapPublisherConfig publisher;  ///< the map's outputs
-  MapSaverConfig saving;         ///< the map's files and database
-  double prune_period_s = 5.0;   ///< how often cells beyond max_extent_m go to the database (or are dropped) [s]
-  std::string map_file;          ///< a .bt or .ot to start from (octomap_server's map_file); empty: an empty map
-  int update_queue_size = 100;   ///< updates waiting for the fusion; more are lost (and counted)
+  MapPublisherConfig publisher;        ///< the map's outputs
+  MapSaverConfig saving;               ///< the map's files and database
+  DistanceFieldServerConfig distance;  ///< the planners' distance field (distance_field.h) and its slice
+  double prune_period_s = 5.0;         ///< how often cells beyond max_extent_m go to the database (or are dropped) [s]
+  std::string map_file;                ///< a .bt or .ot to start from (octomap_server's map_file); empty: an empty map
+  int update_queue_size = 100;         ///< updates waiting for the fusion; more are lost (and counted)
 
   /// The parameters (stereo_occupancy/parameter_table.h): f(spec, member) for each, the components' included.
   template <typename Self, typename F>
@@ -87,19 +90,50 @@ struct OctomapAccumulatorParameters {
     f(textParameter("map_file", "a .bt or .ot to start from; empty: an empty map"), p.map_file);
     f(numberParameter("update_queue_size", "updates", 1.0, 10000.0, "updates waiting for the fusion"),
       p.update_queue_size);
+    DistanceFieldServerConfig::forEachParameter(p.distance, f);
   }
 
   /// The ranges of forEachParameter(), a world frame for a map_file, and the
   /// components' checks (a plain map_name, a projection band of positive
-  /// height, a valid map config).
+  /// height, a valid map config, a valid distance field).
   bool isValid(std::string* why) const;
 };
+
+/// Parameters of the PathWatcher nodelet (src/nodelets/path_watcher.cpp):
+/// the example planner that reads the accumulator's distance field in place.
+struct PathWatcherParameters {
+  /// The accumulator's nodelet name: the key of DistanceFieldRegistry.
+  std::string accumulator = "/octomap_accumulator";
+  /// The path: "x y z; x y z; ..." in the map's frame [m]; at least one waypoint.
+  std::string waypoints = "0 0 4; 80 0 4";
+  double radius_m = 0.5;             ///< the body's radius [m]; at most the field's max_distance_m
+  bool unknown_as_occupied = false;  ///< unknown space blocks the path
+  double period_s = 1.0;             ///< how often the path is checked [s]
+
+  template <typename Self, typename F>
+  static void forEachParameter(Self& p, F&& f) {
+    f(textParameter("accumulator", "the accumulator's nodelet name, whose distance field is read"), p.accumulator);
+    f(textParameter("waypoints", "the path: 'x y z; x y z; ...' in the map's frame [m]"), p.waypoints);
+    f(numberParameter("radius_m", "m", 0.0, 20.0, "the body's radius; at most the field's max_distance_m"), p.radius_m);
+    f(textParameter("unknown_as_occupied", "unknown space blocks the path"), p.unknown_as_occupied);
+    f(numberParameter("period_s", "s", 0.01, 3600.0, "how often the path is checked"), p.period_s);
+  }
+  /// The ranges, an accumulator name, waypoints that parse (parseWaypoints()).
+  bool isValid(std::string* why) const;
+};
+
+/// Parses "x y z; x y z; ..." (numbers separated by spaces or commas,
+/// waypoints by ';') into @p W_waypoints; false with the reason for
+/// anything else, no waypoint, a number that is not finite, or more than
+/// DistanceField::kMaxWaypoints waypoints.
+bool parseWaypoints(const std::string& text, std::vector<Eigen::Vector3d>* W_waypoints, std::string* why);
 
 /// Reads private parameters into @p params (defaults for missing ones) and
 /// validates them; false with a message naming the parameter and its valid
 /// range in @p why.
 bool loadParameters(const ros::NodeHandle& private_nh, DisparityMapperParameters* params, std::string* why);
 bool loadParameters(const ros::NodeHandle& private_nh, OctomapAccumulatorParameters* params, std::string* why);
+bool loadParameters(const ros::NodeHandle& private_nh, PathWatcherParameters* params, std::string* why);
 
 /// The same from name=value pairs (the offline tools): the names of both
 /// nodelets' parameters (a name both have, such as resolution_m, sets both).
