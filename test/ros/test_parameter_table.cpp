@@ -202,6 +202,7 @@ void expectReadmeSaysTheTable(const std::string& nodelet) {
 TEST(ParameterTable, IsValidChecksTheTablesRanges) {
   expectIsValidChecksTheTable<DisparityMapperParameters>();
   expectIsValidChecksTheTable<OctomapAccumulatorParameters>();
+  expectIsValidChecksTheTable<PathWatcherParameters>();
   std::string why;
   DisparityMapperParameters nan;
   nan.drawing.sensor_model.k_m = std::nan("");
@@ -280,6 +281,7 @@ TEST(ParameterTable, MappingYamlSaysTheTable) {
 TEST(ParameterTable, TheReadmeTablesSayTheTable) {
   expectReadmeSaysTheTable<DisparityMapperParameters>("DisparityMapper");
   expectReadmeSaysTheTable<OctomapAccumulatorParameters>("OctomapAccumulator");
+  expectReadmeSaysTheTable<PathWatcherParameters>("PathWatcher");
 }
 
 namespace {
