@@ -19,7 +19,6 @@
 #include <sensor_msgs/PointCloud2.h>
 
 #include <Eigen/Core>
-#include <Eigen/Geometry>  // distance_field.h uses Eigen::AlignedBox3d
 
 #include <atomic>
 #include <cstdint>
