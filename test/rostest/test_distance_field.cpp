@@ -86,15 +86,19 @@ constexpr double kRadiusM = 0.3;
 
 class DistanceFieldTest : public ::testing::Test {
  protected:
+  // The flight once for all tests. Nothing in SetUpTestSuite() may fail a
+  // check: gtest then skips every test, and rosunit counts skipped tests as
+  // passed. Each test's SetUp() fails instead.
   static void SetUpTestSuite() {
     scenario_ = makeScenario("posts");
-    flyThePostsFlight();
+    flight_error_ = flyThePostsFlight();
   }
+  void SetUp() override { ASSERT_TRUE(flight_error_.empty()) << flight_error_; }
 
   /// Publishes every second frame of the posts flight with its tf, each
   /// after the mapper's update of the one before, then waits for the field
-  /// to hold the last.
-  static void flyThePostsFlight() {
+  /// to hold the last. Returns what went wrong, or "".
+  static std::string flyThePostsFlight() {
     ros::NodeHandle nh;
     tf2_ros::TransformBroadcaster tf;
     ros::Publisher pub = nh.advertise<stereo_msgs::DisparityImage>("/stereo/disparity", 5);
@@ -105,10 +109,10 @@ class DistanceFieldTest : public ::testing::Test {
           std::lock_guard<std::mutex> lock(mutex);
           last_update = msg->header.stamp;
         });
-    ASSERT_TRUE(waitFor(
-        mutex, [&] { return pub.getNumSubscribers() > 0 && updates.getNumPublishers() > 0; }, 30.0))
-        << "the mapper did not connect";
-    ASSERT_TRUE(ros::service::waitForService(kNode + "distance", ros::Duration(30.0)));
+    if (!waitFor(
+            mutex, [&] { return pub.getNumSubscribers() > 0 && updates.getNumPublishers() > 0; }, 30.0))
+      return "the mapper did not connect";
+    if (!ros::service::waitForService(kNode + "distance", ros::Duration(30.0))) return "no ~distance service";
     ros::Time last_stamp;
     for (size_t i = 0; i < scenario_.T_W_B.size(); i += 2) {
       const ros::Time stamp = ros::Time::now();
@@ -122,9 +126,9 @@ class DistanceFieldTest : public ::testing::Test {
                           scenario_.effects.max_search_disparity_px, scenario_.effects.subpixel_step_px, msg.get());
       pub.publish(msg);
       // Paced by the mapper: each frame mapped, none dropped on a loaded machine.
-      EXPECT_TRUE(waitFor(
-          mutex, [&] { return last_update == stamp; }, 10.0))
-          << "frame " << i << " was not mapped";
+      if (!waitFor(
+              mutex, [&] { return last_update == stamp; }, 10.0))
+        return "frame " + std::to_string(i) + " was not mapped within 10 s";
       last_stamp = stamp;
     }
     // The field holds the last update once ~distance answers with its stamp.
@@ -132,12 +136,16 @@ class DistanceFieldTest : public ::testing::Test {
     get.request.points.push_back(point(60, 0, 3));
     const ros::WallTime until = ros::WallTime::now() + ros::WallDuration(20.0);
     while (ros::WallTime::now() < until) {
-      ASSERT_TRUE(ros::service::call(kNode + "distance", get));
+      if (!ros::service::call(kNode + "distance", get)) return "~distance did not answer";
       if (get.response.header.stamp == last_stamp) break;
       ros::WallDuration(0.1).sleep();
     }
-    ASSERT_EQ(get.response.header.stamp, last_stamp) << "the field does not hold the flight's last update";
+    if (get.response.header.stamp != last_stamp)
+      return "the field does not hold the flight's last update (its stamp " +
+             std::to_string(get.response.header.stamp.toSec()) + ", the last update's " +
+             std::to_string(last_stamp.toSec()) + ")";
     last_stamp_ = last_stamp;
+    return "";
   }
 
   static CheckPath::Response checkPath(const std::vector<geometry_msgs::Point>& waypoints, double radius_m,
@@ -166,10 +174,12 @@ class DistanceFieldTest : public ::testing::Test {
 
   static FlightScenario scenario_;
   static ros::Time last_stamp_;
+  static std::string flight_error_;  ///< "" once the field holds the whole flight
 };
 
 FlightScenario DistanceFieldTest::scenario_;
 ros::Time DistanceFieldTest::last_stamp_;
+std::string DistanceFieldTest::flight_error_ = "not flown";
 
 }  // namespace
 
