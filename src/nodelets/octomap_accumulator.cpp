@@ -55,6 +55,7 @@ class OctomapAccumulator : public nodelet::Nodelet {
   std::unique_ptr<MapFusion> fusion_;  ///< the pipeline: checks, fusion, pruning
   ProcessingTimes fusion_times_;       ///< per update fused
   std::string last_problem_;
+  std::string field_problem_;  ///< why the distance field's last update failed; empty when it went through
 
   // Declared after the map: destroyed (their callbacks ended) before it.
   std::unique_ptr<DistanceFieldServer> field_;  ///< the planners' distance field; null with distance_field off
@@ -128,9 +129,10 @@ void OctomapAccumulator::updateField() {
   if (!field_) return;
   try {
     field_->update();
+    field_problem_.clear();
   } catch (const std::exception& e) {  // bad_alloc: the map goes on; the next update reads the window again
-    last_problem_ = std::string("distance field update failed: ") + e.what();
-    NODELET_ERROR_THROTTLE(kWarnThrottleS, "%s", last_problem_.c_str());
+    field_problem_ = std::string("distance field update failed: ") + e.what();
+    NODELET_ERROR_THROTTLE(kWarnThrottleS, "%s", field_problem_.c_str());
   }
 }
 
@@ -280,6 +282,7 @@ void OctomapAccumulator::diagnose(diagnostic_updater::DiagnosticStatusWrapper& s
   status.add("fusion time p50 since last report [ms]", window.median_ms);
   status.add("fusion time p99 since last report [ms]", window.p99_ms);
   if (field_) {
+    if (!field_problem_.empty()) status.mergeSummary(diagnostic_msgs::DiagnosticStatus::ERROR, field_problem_);
     const TimeStatistics field = field_->times().takeWindow();
     status.add("distance field updates since last report", field.count);
     status.add("distance field update p50 since last report [ms]", field.median_ms);

@@ -3,11 +3,13 @@
 // through the mapper and the accumulator; then a planner's questions on the
 // accumulator's ~check_path, ~cast_ray and ~distance, answered against the
 // scene's true geometry, bad input refused with a reason while the nodelet
-// keeps serving, and the PathWatcher nodelet in the same manager, reading the
-// field in place, gives the service's verdict.
+// keeps serving, the PathWatcher nodelet in the same manager, reading the
+// field in place, gives the service's verdict, and ~clear_bbx and ~reset
+// reach the field at once.
 
 #include <gtest/gtest.h>
 #include <ros/ros.h>
+#include <std_srvs/Empty.h>
 #include <stereo_msgs/DisparityImage.h>
 #include <tf2_ros/transform_broadcaster.h>
 
@@ -17,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "stereo_occupancy/BoundingBoxQuery.h"
 #include "stereo_occupancy/CastRay.h"
 #include "stereo_occupancy/CheckPath.h"
 #include "stereo_occupancy/GetDistances.h"
@@ -367,4 +370,31 @@ TEST_F(DistanceFieldTest, ThePathWatcherInTheSameManagerSeesTheSameVerdict) {
   EXPECT_EQ(last->point.y, r.point.y);
   EXPECT_EQ(last->point.z, r.point.z);
   EXPECT_EQ(last->min_clearance_m, r.min_clearance_m);
+}
+
+// Last, since it changes the map: ~clear_bbx and ~reset reach the field at
+// once, without waiting for the next update.
+TEST_F(DistanceFieldTest, ClearAndResetReachTheFieldAtOnce) {
+  BoundingBoxQuery clear;
+  clear.request.min = point(62.0, 2.5, -1.0);
+  clear.request.max = point(64.0, 4.5, 9.0);
+  ASSERT_TRUE(ros::service::call(kNode + "clear_bbx", clear));
+  const CastRay::Response through = castRay(point(57, 3.5, 3), 1.0, 0.0, 0.0, 10.0);
+  ASSERT_TRUE(through.success) << through.message;
+  EXPECT_NE(through.verdict, CastRay::Response::HIT)
+      << "hit at (" << through.point.x << ", " << through.point.y << ", " << through.point.z << ") after the clear";
+  GetDistances get;
+  get.request.points = {point(63.125, 3.375, 3.125)};
+  ASSERT_TRUE(ros::service::call(kNode + "distance", get));
+  ASSERT_TRUE(get.response.success) << get.response.message;
+  EXPECT_NE(get.response.cell_class[0], GetDistances::Response::CELL_OCCUPIED);
+  EXPECT_GT(get.response.distance_m[0], 0.0f);
+
+  std_srvs::Empty reset;
+  ASSERT_TRUE(ros::service::call(kNode + "reset", reset));
+  get.request.points = {point(60, 0, 3)};
+  ASSERT_TRUE(ros::service::call(kNode + "distance", get));
+  ASSERT_TRUE(get.response.success) << get.response.message;
+  EXPECT_EQ(get.response.cell_class[0], GetDistances::Response::CELL_UNKNOWN);
+  EXPECT_EQ(checkPath(kLane, kRadiusM, false).verdict, CheckPath::Response::UNKNOWN);
 }
