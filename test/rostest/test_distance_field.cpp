@@ -9,6 +9,8 @@
 
 #include <gtest/gtest.h>
 #include <ros/ros.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
 #include <std_srvs/Empty.h>
 #include <stereo_msgs/DisparityImage.h>
 #include <tf2_ros/transform_broadcaster.h>
@@ -370,6 +372,41 @@ TEST_F(DistanceFieldTest, ThePathWatcherInTheSameManagerSeesTheSameVerdict) {
   EXPECT_EQ(last->point.y, r.point.y);
   EXPECT_EQ(last->point.z, r.point.z);
   EXPECT_EQ(last->min_clearance_m, r.min_clearance_m);
+}
+
+TEST_F(DistanceFieldTest, TheSliceIsTheFieldsLayerAtItsHeight) {
+  // The field no longer changes: a new subscriber gets the slice all the same.
+  ros::NodeHandle nh;
+  std::mutex mutex;
+  sensor_msgs::PointCloud2ConstPtr slice;
+  ros::Subscriber sub =
+      nh.subscribe<sensor_msgs::PointCloud2>("/distance_slice", 1, [&](const sensor_msgs::PointCloud2ConstPtr& msg) {
+        std::lock_guard<std::mutex> lock(mutex);
+        slice = msg;
+      });
+  ASSERT_TRUE(waitFor(
+      mutex, [&] { return slice != nullptr; }, 10.0))
+      << "no distance_slice for a new subscriber";
+  std::lock_guard<std::mutex> lock(mutex);
+  EXPECT_EQ(slice->header.frame_id, "map");
+  EXPECT_EQ(slice->header.stamp, last_stamp_);
+  ASSERT_EQ(slice->fields.size(), 4u);
+  EXPECT_EQ(slice->fields[3].name, "intensity");
+  EXPECT_GT(slice->width * slice->height, 1000u);
+  // distance_slice_z_m 2 (config/mapping.yaml): the layer from 2 to 2.25 m.
+  bool post_seen = false;
+  for (sensor_msgs::PointCloud2ConstIterator<float> x(*slice, "x"), y(*slice, "y"), z(*slice, "z"),
+       d(*slice, "intensity");
+       x != x.end(); ++x, ++y, ++z, ++d) {
+    ASSERT_FLOAT_EQ(*z, 2.125f);
+    ASSERT_GE(*d, 0.0f);
+    ASSERT_LE(*d, 2.0f);
+    if (std::abs(*x - 63.125f) < 0.01f && std::abs(*y - 3.375f) < 0.01f) {
+      post_seen = true;
+      EXPECT_EQ(*d, 0.0f) << "gate 4's left post";
+    }
+  }
+  EXPECT_TRUE(post_seen) << "the slice lacks gate 4's left post";
 }
 
 // Last, since it changes the map: ~clear_bbx and ~reset reach the field at
