@@ -15,10 +15,13 @@
 #include <stereo_msgs/DisparityImage.h>
 #include <tf2_ros/transform_broadcaster.h>
 
+#include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "stereo_occupancy/BoundingBoxQuery.h"
@@ -118,6 +121,32 @@ class DistanceFieldTest : public ::testing::Test {
             mutex, [&] { return pub.getNumSubscribers() > 0 && updates.getNumPublishers() > 0; }, 30.0))
       return "the mapper did not connect";
     if (!ros::service::waitForService(kNode + "distance", ros::Duration(30.0))) return "no ~distance service";
+    // A planner asks all through the flight, while the field is updated (queries and updates never race).
+    std::atomic<bool> flying{true};
+    std::atomic<int> answered{0}, failed{0};
+    std::string first_failure;  // the planner thread's, read after join()
+    std::thread planner([&] {
+      // Persistent connections, a call every 2 ms: thousands of calls each on a
+      // new connection leave as many sockets in TIME_WAIT, and one connect may fail.
+      ros::ServiceClient check_client = nh.serviceClient<CheckPath>(kNode + "check_path", /*persistent=*/true);
+      ros::ServiceClient get_client = nh.serviceClient<GetDistances>(kNode + "distance", /*persistent=*/true);
+      while (flying) {
+        ros::WallDuration(0.002).sleep();
+        CheckPath check;
+        check.request.waypoints = kThroughThePost;
+        check.request.radius_m = kRadiusM;
+        GetDistances get;
+        get.request.points = kLane;
+        const bool check_called = check_client.call(check);
+        const bool get_called = get_client.call(get);
+        const bool ok = check_called && check.response.success && get_called && get.response.success;
+        if (!ok && failed == 0)
+          first_failure = "check_path " + std::string(check_called ? "answered '" : "not answered '") +
+                          check.response.message + "', distance " + (get_called ? "answered '" : "not answered '") +
+                          get.response.message + "'";
+        ++(ok ? answered : failed);
+      }
+    });
     ros::Time last_stamp;
     for (size_t i = 0; i < scenario_.T_W_B.size(); i += 2) {
       const ros::Time stamp = ros::Time::now();
@@ -132,10 +161,19 @@ class DistanceFieldTest : public ::testing::Test {
       pub.publish(msg);
       // Paced by the mapper: each frame mapped, none dropped on a loaded machine.
       if (!waitFor(
-              mutex, [&] { return last_update == stamp; }, 10.0))
+              mutex, [&] { return last_update == stamp; }, 10.0)) {
+        flying = false;
+        planner.join();
         return "frame " + std::to_string(i) + " was not mapped within 10 s";
+      }
       last_stamp = stamp;
     }
+    flying = false;
+    planner.join();
+    std::printf("queries during the flight: %d answered\n", answered.load());
+    if (failed > 0 || answered < 10)
+      return "queries during the flight: " + std::to_string(answered) + " answered, " + std::to_string(failed) +
+             " failed (the first: " + first_failure + ")";
     // The field holds the last update once ~distance answers with its stamp.
     GetDistances get;
     get.request.points.push_back(point(60, 0, 3));
