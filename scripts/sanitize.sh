@@ -13,7 +13,7 @@ printf '%s\n' "$repo"/src/core/*.cpp "$repo"/bench/src/sim/*.cpp "$repo"/test/co
   "$repo"/test/gtest_main.cpp |
   xargs -P "$(nproc)" -I{} sh -c 'g++ "$@" -c "{}" -o "'"$out"'/obj/$(basename {} .cpp).o"' _ "${flags[@]}"
 g++ "${flags[@]}" "$out"/obj/*.o -lgtest -lpthread -lopencv_core -lopencv_imgproc -lopencv_imgcodecs -lopencv_calib3d \
-  -loctomap -loctomath -o "$out/core_test_sanitized"
+  -loctomap -loctomath -ldynamicedt3d -o "$out/core_test_sanitized"  # dynamicedt3d: the distance field's comparison
 xml=()
 [ -n "${RESULTS:-}" ] && mkdir -p "$RESULTS" && xml=(--gtest_output="xml:$RESULTS/sanitized-core.xml")
 cd "$out"
