@@ -51,8 +51,8 @@ FlightTimes timeFlight(const so::FlightScenario& scenario) {
   std::vector<cv::Mat> depths;
   std::vector<octomap::Pointcloud> clouds;
   for (size_t i = 0; i < scenario.T_W_B.size(); ++i) {
-    images.push_back(ours.prepare(scenario, i, i));
     const cv::Mat disparity = so::renderStereoFrame(scenario, i, 1);
+    images.push_back(ours.prepare(scenario, i, disparity, i));
     depths.push_back(so::tools::depthFromDisparity(disparity, scenario.camera));
     clouds.push_back(so::tools::disparityCloud(disparity, scenario.camera, scenario.cameraPose(i)));
   }

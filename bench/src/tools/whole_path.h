@@ -27,9 +27,11 @@ class WholePath {
  public:
   explicit WholePath(int threads) : mapping_(mapperParameters(threads)), fusion_(accumulatorParameters(threads)) {}
 
-  /// Frame @p frame of @p scenario as a camera driver publishes it, its
-  /// pose on tf at the k-th stamp (untimed: the driver's and tf's work).
-  stereo_msgs::DisparityImageConstPtr prepare(const FlightScenario& scenario, size_t frame, size_t k) {
+  /// Frame @p frame of @p scenario, whose image is @p disparity
+  /// (renderStereoFrame()), as a camera driver publishes it, its pose on tf
+  /// at the k-th stamp (untimed: the driver's and tf's work).
+  stereo_msgs::DisparityImageConstPtr prepare(const FlightScenario& scenario, size_t frame, const cv::Mat& disparity,
+                                              size_t k) {
     const ros::Time stamp = ros::Time(1000.0) + ros::Duration(0.1 * static_cast<double>(k));
     tf_.setTransform(toTransformMsg(scenario.T_W_B[frame], stamp, "map", "base_link"), "bench");
     tf_.setTransform(toTransformMsg(scenario.T_B_C, stamp, "base_link", "camera_optical"), "bench");
@@ -37,8 +39,8 @@ class WholePath {
     header.stamp = stamp;
     header.frame_id = "camera_optical";
     auto msg = boost::make_shared<stereo_msgs::DisparityImage>();
-    toDisparityImageMsg(renderStereoFrame(scenario, frame, 1), header, scenario.camera,
-                        scenario.effects.max_search_disparity_px, scenario.effects.subpixel_step_px, msg.get());
+    toDisparityImageMsg(disparity, header, scenario.camera, scenario.effects.max_search_disparity_px,
+                        scenario.effects.subpixel_step_px, msg.get());
     return msg;
   }
 
