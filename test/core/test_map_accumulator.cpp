@@ -46,6 +46,22 @@ void integrateTable1Image(DrawingAlgorithm algorithm, MapAccumulator* map) {
   encodeGridUpdate(grid, T.translation(), &update);
   ASSERT_TRUE(map->integrate(update));
 }
+
+/// The updates of @p frames of @p scenario, drawn with line_pyramid.
+std::vector<GridUpdate> flightUpdates(const FlightScenario& scenario, std::initializer_list<size_t> frames) {
+  DrawingConfig drawing;
+  drawing.algorithm = DrawingAlgorithm::kLinePyramid;
+  DisparityDrawer drawer(scenario.camera, drawing);
+  std::vector<GridUpdate> updates;
+  for (size_t frame : frames) {
+    const Eigen::Isometry3d T = scenario.cameraPose(frame);
+    LocalGrid grid;
+    drawer.draw(renderStereoFrame(scenario, frame, 1), T, &grid);
+    updates.emplace_back();
+    encodeGridUpdate(grid, T.translation(), &updates.back());
+  }
+  return updates;
+}
 }  // namespace
 
 // OcTree keys run from 0 to 65535 (global index -32768 .. 32767 at depth
@@ -272,17 +288,7 @@ TEST(MapAccumulator, IntegrateEqualsUpdateNodeOverAFlight) {
 // and tiles.
 TEST(MapAccumulator, ThreadCountsFuseTheSameTree) {
   const FlightScenario scenario = makeScenario("posts");
-  DrawingConfig drawing;
-  drawing.algorithm = DrawingAlgorithm::kLinePyramid;
-  DisparityDrawer drawer(scenario.camera, drawing);
-  std::vector<GridUpdate> updates;
-  for (size_t frame : {0u, 1u, 30u, 31u, 90u}) {
-    const Eigen::Isometry3d T = scenario.cameraPose(frame);
-    LocalGrid grid;
-    drawer.draw(renderStereoFrame(scenario, frame, 1), T, &grid);
-    updates.emplace_back();
-    encodeGridUpdate(grid, T.translation(), &updates.back());
-  }
+  const std::vector<GridUpdate> updates = flightUpdates(scenario, {0u, 1u, 30u, 31u, 90u});
   // Two key-aligned cubes in front of the first camera, pruned to one leaf each.
   MapAccumulatorConfig cfg;
   octomap::OcTree cubes(cfg.resolution_m);
@@ -502,17 +508,7 @@ bool lessCell(const Eigen::Vector3i& a, const Eigen::Vector3i& b) {
 // class after the update; the tree the same as without recording.
 TEST(MapAccumulator, RecordsTheCellsWhoseClassAnUpdateChanged) {
   const FlightScenario scenario = makeScenario("posts");
-  DrawingConfig drawing;
-  drawing.algorithm = DrawingAlgorithm::kLinePyramid;
-  DisparityDrawer drawer(scenario.camera, drawing);
-  std::vector<GridUpdate> updates;
-  for (size_t frame : {0u, 1u, 30u}) {
-    const Eigen::Isometry3d T = scenario.cameraPose(frame);
-    LocalGrid grid;
-    drawer.draw(renderStereoFrame(scenario, frame, 1), T, &grid);
-    updates.emplace_back();
-    encodeGridUpdate(grid, T.translation(), &updates.back());
-  }
+  const std::vector<GridUpdate> updates = flightUpdates(scenario, {0u, 1u, 30u});
   MapAccumulatorConfig cfg;
   octomap::OcTree cubes(cfg.resolution_m);
   const int offset = static_cast<int>(cubes.coordToKey(0.0));
