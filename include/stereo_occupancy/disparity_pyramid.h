@@ -163,6 +163,13 @@ class DisparityBlockBound {
     return rest > 0.0f ? d_min * bf_ / rest : std::numeric_limits<float>::infinity();
   }
 
+  /// From this disparity on a faithful pair's inner pairs are faithful:
+  /// isFaithful(a, b) implies isFaithful(a', b') for monotoneFrom() <= a <=
+  /// a' <= b' <= b (maxNearDisparity() never falls as d_min grows). A gap
+  /// inside a faithful gap is then one. (Below it lie the surface profile's
+  /// ranges hundreds of metres out, whose gap covers the whole range.) [px]
+  float monotoneFrom() const { return monotone_from_; }
+
   /// Disparities up to this are tabulated (8 bins per pixel).
   static constexpr double kMaxTabulatedPx = 1024.0;
 
@@ -172,6 +179,7 @@ class DisparityBlockBound {
   std::vector<float> max_d_max_;  ///< per bin [k, k+1) / bins_per_px of d_min, conservative over the bin
   float bf_;                      ///< b·f [px·m]
   float c_;                       ///< cell size [m]
+  float monotone_from_;           ///< monotoneFrom()
 };
 
 }  // namespace stereo_occupancy

@@ -216,6 +216,12 @@ class LineDrawer {
     static constexpr int kMaxLeaves = 64;  ///< more: the block is descended
     int count = 0;
     float lo[kMaxLeaves], hi[kMaxLeaves];  ///< a leaf's min and max disparity [px]
+    float hull_lo = 0.0f, hull_hi = 0.0f;  ///< the leaves' smallest lo and largest hi [px]
+    /// Each leaf, in the order gathered, overlaps the hull of the leaves
+    /// before it or leaves a faithful gap to it.
+    bool chained = true;
+    /// Extends the hull by the next leaf, [lo, hi], before it is added.
+    void chain(const DisparityBlockBound& bound, float lo, float hi);
   };
   /// Adds the leaves below a block; false if one is sky (its free line to the
   /// range is needed) or there are more than kMaxLeaves.

@@ -296,6 +296,15 @@ DisparityBlockBound::DisparityBlockBound(const StereoCameraModel& camera, const 
   }
   bf_ = static_cast<float>(bf);
   c_ = static_cast<float>(cell_size_m);
+  // Beyond the table the one-cell bound rises with d_min (each float step
+  // rounds monotonically); it must not start below the table's last bin.
+  const float first_untabulated = static_cast<float>(bins) / bins_per_px_;
+  monotone_from_ = std::numeric_limits<float>::infinity();
+  if (max_d_max_.back() <= maxNearDisparity(first_untabulated)) {
+    size_t first = max_d_max_.size() - 1;  // the first bin of the table's rising tail
+    while (first > 0 && max_d_max_[first - 1] <= max_d_max_[first]) --first;
+    monotone_from_ = static_cast<float>(first) / bins_per_px_;
+  }
 }
 
 }  // namespace stereo_occupancy

@@ -928,12 +928,26 @@ void LineDrawer::descendBounded(const Descent& s, int level, int x, int y, doubl
     for (int cx = 2 * x; cx <= 2 * x + 1 && cx < w; ++cx) descendBounded(s, level - 1, cx, cy, z_begin);
 }
 
+void LineDrawer::SpanLeaves::chain(const DisparityBlockBound& bound, float lo, float hi) {
+  if (count == 0) {
+    hull_lo = lo;
+    hull_hi = hi;
+    return;
+  }
+  const bool below = hi < hull_lo;
+  const bool above = lo > hull_hi;
+  if ((below && !bound.isFaithful(hi, hull_lo)) || (above && !bound.isFaithful(hull_hi, lo))) chained = false;
+  hull_lo = std::min(hull_lo, lo);
+  hull_hi = std::max(hull_hi, hi);
+}
+
 bool LineDrawer::gatherLeaves(const Descent& s, int level, int x, int y, SpanLeaves* out) const {
   const float lo = s.min_pyramid.at(level, x, y);
   if (lo == DisparityPyramid::kInvalidMin) return true;  // no pixel, no line
   const float hi = level > 0 ? s.max_pyramid->at(level, x, y) : lo;
   if (level <= levels_.minLevel() || s.bound->isFaithful(lo, hi)) {  // where descendBounded() draws a line
     if (!measuresRange(camera_, lo) || out->count == SpanLeaves::kMaxLeaves) return false;
+    out->chain(*s.bound, lo, hi);
     const int i = out->count++;
     out->lo[i] = lo;
     out->hi[i] = hi;
@@ -949,6 +963,10 @@ bool LineDrawer::gatherLeaves(const Descent& s, int level, int x, int y, SpanLea
 
 bool LineDrawer::isSpan(const Descent& s, int level, int x, int y, SpanLeaves* leaves) const {
   if (!gatherLeaves(s, level, x, y, leaves) || leaves->count == 0) return false;
+  // Chained leaves leave no gap but faithful ones and those inside them
+  // (faithful too where the bound is monotone): the walk below would find no
+  // hole. Most spans are chained; only the others need the sort.
+  if (leaves->chained && leaves->hull_lo >= s.bound->monotoneFrom()) return true;
   // Nearest first, each next leaf must come within one measurement's gap
   // of the depths before it. The order is sorted farthest first and walked
   // backwards. (The order among equal depths does not change the answer.)

@@ -4,9 +4,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <random>
 #include <vector>
 
 #include "stereo_occupancy/disparity_drawer.h"
@@ -199,6 +201,37 @@ TEST(DisparityBlockBound, BeyondTheTableOneCell) {
   EXPECT_NEAR(bound.maxNearDisparity(d_min), 50000.0 * 1e6 / (1e6 - kCell * 50000.0), 0.1);  // 50632.9
   EXPECT_TRUE(bound.isFaithful(d_min, 50600.0f));
   EXPECT_FALSE(bound.isFaithful(d_min, 50700.0f));
+}
+
+/// The span test's shortcut relies on it: a gap inside a faithful gap is
+/// faithful, for both profiles and the cell sizes users run, from twice the
+/// camera's range on.
+TEST(DisparityBlockBound, InnerPairsOfAFaithfulPairAreFaithful) {
+  const StereoCameraModel cam{StereoCameraConfig()};
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  for (const SensorProfile profile : {SensorProfile::kGaussian, SensorProfile::kSurface})
+    for (double cell_m : {0.05, 0.1, 0.25, 0.5}) {
+      InverseSensorModelConfig model_config;
+      model_config.profile = profile;
+      const DisparityBlockBound bound(cam, InverseSensorModel(model_config), cell_m);
+      SCOPED_TRACE(cell_m);
+      ASSERT_LE(bound.monotoneFrom(), 0.5 * cam.farDisparity());
+      const float lowest = bound.monotoneFrom(), highest = static_cast<float>(cam.nearDisparity()) + 50.0f;
+      int faithful = 0, inner_unfaithful = 0;
+      for (int i = 0; i < 20000; ++i) {
+        // A faithful pair (a, b), b up to a tenth beyond the bound, and a pair inside it.
+        const float a = lowest + (highest - lowest) * unit(rng);
+        const float b = a + 1.1f * (std::min(bound.maxNearDisparity(a), 2.0f * highest) - a) * unit(rng);
+        const float a_inner = a + (b - a) * unit(rng);
+        const float b_inner = a_inner + (b - a_inner) * unit(rng);
+        if (!bound.isFaithful(a, b)) continue;
+        ++faithful;
+        inner_unfaithful += !bound.isFaithful(a_inner, b_inner);
+      }
+      EXPECT_GT(faithful, 15000);
+      EXPECT_EQ(inner_unfaithful, 0);
+    }
 }
 
 /// Cells so near the camera that their footprint spans more top-level blocks
