@@ -6,6 +6,7 @@
 /// that the fusion does not depend on the field.
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>  // AlignedBox3i
 
 #include <cstdint>
 
@@ -31,5 +32,10 @@ struct CellClassChange {
   Eigen::Vector3i cell;
   CellClass now = CellClass::kUnknown;
 };
+
+/// A box of cells whose classes may have changed in any way (a tile dropped
+/// or loaded, the part of the map a prune dropped, a cleared box): global
+/// cell indices as CellClassChange's, both corners inside the box.
+using CellBox = Eigen::AlignedBox3i;
 
 }  // namespace stereo_occupancy

@@ -123,7 +123,15 @@ class DistanceField {
   /// obstacle), else not (distances near the edge ignore what lies beyond).
   /// @throws std::invalid_argument if @p map's resolution is not the field's.
   void update(const octomap::OcTree& map, const std::vector<CellClassChange>& changes, bool all,
-              const Eigen::Vector3d& W_vehicle);
+              const Eigen::Vector3d& W_vehicle) {
+    update(map, changes, {}, all, W_vehicle);
+  }
+  /// The same with @p regions, boxes in which the map changed otherwise
+  /// (MapAccumulator::takeClassChanges()): the window's blocks they overlap
+  /// are read from @p map again after @p changes are applied; a region
+  /// outside the window costs nothing.
+  void update(const octomap::OcTree& map, const std::vector<CellClassChange>& changes,
+              const std::vector<CellBox>& regions, bool all, const Eigen::Vector3d& W_vehicle);
 
   /// The window's box in the map's frame [m].
   Eigen::AlignedBox3d window() const;
@@ -161,6 +169,9 @@ class DistanceField {
 
   /// Cells whose distance the last update() recomputed (for the summary lines).
   size_t lastUpdatedCells() const { return last_updated_cells_; }
+  /// Cells the last update() read from the map: the blocks that entered the
+  /// window, the blocks of the regions, or the whole window.
+  size_t lastReadCells() const { return last_read_cells_; }
 
  private:
   /// Cells are stored block by block (kBlockCells^3 each, x fastest inside),
@@ -207,8 +218,13 @@ class DistanceField {
   Eigen::Vector3i wantedOrigin(const Eigen::Vector3d& W_vehicle) const;
   void moveTo(const octomap::OcTree& map, const Eigen::Vector3i& origin_block);
   void readAll(const octomap::OcTree& map);
-  /// Sets the local blocks [lo, hi) unknown, reads them from @p map, marks them changed.
+  /// Reads the local blocks [lo, hi) that entered from @p map and marks them (markEntered()).
   void readBlocks(const octomap::OcTree& map, const Eigen::Vector3i& lo, const Eigen::Vector3i& hi);
+  /// Sets the local blocks [lo, hi) unknown and reads their classes from @p map.
+  void readClasses(const octomap::OcTree& map, const Eigen::Vector3i& lo, const Eigen::Vector3i& hi);
+  /// Reads the window's blocks that @p cells overlaps from @p map again;
+  /// those that held or hold what the outside does not are changed.
+  void readRegion(const octomap::OcTree& map, const CellBox& cells);
   /// Marks the blocks [lo, hi) that entered: computed, and the ones that
   /// differ from the outside (differsFromOutside()) changed.
   void markEntered(const Eigen::Vector3i& lo, const Eigen::Vector3i& hi);
@@ -252,6 +268,7 @@ class DistanceField {
   DistanceFieldConfig config_;
   double resolution_m_;
   size_t last_updated_cells_ = 0;
+  size_t last_read_cells_ = 0;
 
   Eigen::Vector3i size_blocks_;   ///< the window's edge [blocks]
   Eigen::Vector3i size_cells_;    ///< the window's edge [cells]
@@ -274,6 +291,7 @@ class DistanceField {
   /// Per block: pass 1's / pass 2's values hold one below kFar (an obstacle
   /// within reach), so that passes 2 and 3 skip the blocks far from any.
   std::vector<uint8_t> finite_x_, finite_xy_;
+  std::vector<uint8_t> region_differed_;  ///< readRegion(): per block, differsFromOutside() before the read (scratch)
   // The blocks of one update (local linear indices) and their marks (mark == epoch_: in the list).
   uint32_t epoch_ = 0;
   bool everything_ = false;  ///< this update recomputes the whole window

@@ -144,15 +144,24 @@ class MapAccumulator {
   /// each with its class after the update that changed it, in the order of
   /// the updates (a cell two updates changed comes twice, the later last;
   /// within one update a cell comes once, in an order that depends on the
-  /// threads). @p all is set true instead, and the list is empty, after
-  /// anything else that changed cells (reset, load, clearBox, a prune() that
-  /// dropped leaves, dropTile, insertLeaves), when recording started, or
-  /// when more than kMaxClassChanges piled up: the caller then reads the map
-  /// again. Empty with @p all false when not recording.
+  /// threads), and in @p regions the boxes in which anything else changed
+  /// cells since (clearBox: its box; a prune() that dropped leaves: the
+  /// space outside the box it kept, as up to six slabs, and any dropped
+  /// coarse leaf that reached into that box; dropTile: the tile;
+  /// insertLeaves: the leaves' bounding box). The map's cells in the
+  /// regions are what the caller reads again; the changes of cells outside
+  /// them are the whole story. @p all is set true instead, and both lists
+  /// are empty, after a reset or load, when recording started, or when more
+  /// than kMaxClassChanges changes or kMaxClassRegions regions piled up: the
+  /// caller then reads the map again. Empty with @p all false when not recording.
+  std::vector<CellClassChange> takeClassChanges(bool* all, std::vector<CellBox>* regions);
+  /// The same with the regions given as all: for callers that read the whole map anyway.
   std::vector<CellClassChange> takeClassChanges(bool* all);
   /// Most class changes kept between two takeClassChanges() (16 bytes each);
   /// beyond, they give way to all.
   static constexpr size_t kMaxClassChanges = size_t{1} << 21;
+  /// Most regions kept between two takeClassChanges(); beyond, they give way to all.
+  static constexpr size_t kMaxClassRegions = 256;
 
   /// Tiles: the octree's nodes at depth kTileDepth, kTileCells cells on an
   /// edge (64 m at 0.25 m). A mission keeps the tiles it flew away from on
@@ -227,8 +236,15 @@ class MapAccumulator {
   /// Recording class changes: the changes since the last take; null: not recording.
   std::unique_ptr<ClassChangeLog> class_log_;
   bool classes_all_ = false;  ///< recording, and the map changed otherwise than by integrate()
+  /// The regions of class changes since the last take (recording, not all).
+  std::vector<CellBox> class_regions_;
   /// The map changed otherwise than by integrate(): the class changes give way to all.
   void classesChangedEverywhere();
+  /// The map changed otherwise than by integrate() inside @p cells only.
+  void classesChangedIn(const CellBox& cells);
+  /// prune()'s regions: the complement of the kept cells @p kept (six slabs),
+  /// and the boxes of dropped leaves that reach into it.
+  void classesChangedOutside(const CellBox& kept, const std::vector<CellBox>& dropped_inside);
   /// The log the fusion records into; null when not recording, or when all is due anyway.
   ClassChangeLog* recordingLog() { return classes_all_ ? nullptr : class_log_.get(); }
 };

@@ -107,14 +107,15 @@ Eigen::Vector3i DistanceField::blockOfLinear(int linear) const {
 
 // --- update -------------------------------------------------------------------
 
-void DistanceField::update(const octomap::OcTree& map, const std::vector<CellClassChange>& changes, bool all,
-                           const Eigen::Vector3d& W_vehicle) {
+void DistanceField::update(const octomap::OcTree& map, const std::vector<CellClassChange>& changes,
+                           const std::vector<CellBox>& regions, bool all, const Eigen::Vector3d& W_vehicle) {
   if (std::abs(map.getResolution() - resolution_m_) > 1e-9 * resolution_m_)
     throw std::invalid_argument("distance field: the map's resolution " + std::to_string(map.getResolution()) +
                                 " m is not the field's " + std::to_string(resolution_m_) + " m");
   occupied_log_odds_ = map.getOccupancyThresLog();
   ++epoch_;
   everything_ = false;
+  last_read_cells_ = 0;
   for (auto* list : {&changed_, &blocks_x_, &blocks_y_, &blocks_z_}) list->clear();
   const Eigen::Vector3i origin = W_vehicle.allFinite() ? wantedOrigin(W_vehicle) : origin_block_;
   if (!placed_ || all || ((origin - origin_block_).array().abs() >= size_blocks_.array()).any()) {
@@ -126,6 +127,8 @@ void DistanceField::update(const octomap::OcTree& map, const std::vector<CellCla
   } else {
     if (origin != origin_block_) moveTo(map, origin);
     applyChanges(changes);
+    // After the changes: the map's cells in the regions are the newer word.
+    for (const CellBox& region : regions) readRegion(map, region);
   }
   recompute();
 }
@@ -220,11 +223,45 @@ bool DistanceField::differsFromOutside(size_t slot) const {
 
 void DistanceField::readAll(const octomap::OcTree& map) {
   everything_ = true;
-  readBlocks(map, Eigen::Vector3i::Zero(), size_blocks_);
+  readClasses(map, Eigen::Vector3i::Zero(), size_blocks_);
 }
 
 void DistanceField::readBlocks(const octomap::OcTree& map, const Eigen::Vector3i& lo, const Eigen::Vector3i& hi) {
   if ((hi.array() <= lo.array()).any()) return;
+  readClasses(map, lo, hi);
+  markEntered(lo, hi);
+}
+
+void DistanceField::readRegion(const octomap::OcTree& map, const CellBox& cells) {
+  const Eigen::Vector3i origin_cell = origin_block_ * kBlockCells;
+  const CellBox in_window =
+      cells.intersection(CellBox(origin_cell, origin_cell + size_cells_ - Eigen::Vector3i::Ones()));
+  if (in_window.isEmpty()) return;
+  const Eigen::Vector3i lo = (in_window.min() - origin_cell) / kBlockCells;
+  const Eigen::Vector3i hi = (in_window.max() - origin_cell) / kBlockCells + Eigen::Vector3i::Ones();
+  // A block whose obstacles went or came changes its neighbours' distances.
+  region_differed_.clear();
+  for (int z = lo.z(); z < hi.z(); ++z)
+    for (int y = lo.y(); y < hi.y(); ++y)
+      for (int x = lo.x(); x < hi.x(); ++x)
+        region_differed_.push_back(differsFromOutside(slotOf(Eigen::Vector3i(x, y, z))));
+  readClasses(map, lo, hi);
+  if (everything_) return;
+  size_t i = 0;
+  for (int z = lo.z(); z < hi.z(); ++z)
+    for (int y = lo.y(); y < hi.y(); ++y)
+      for (int x = lo.x(); x < hi.x(); ++x) {
+        const Eigen::Vector3i b(x, y, z);
+        if (region_differed_[i++] || differsFromOutside(slotOf(b)))
+          markChanged(b);
+        else
+          mark(linearOfBlock(b), epoch_, &mark_z_, &blocks_z_);
+      }
+}
+
+void DistanceField::readClasses(const octomap::OcTree& map, const Eigen::Vector3i& lo, const Eigen::Vector3i& hi) {
+  if ((hi.array() <= lo.array()).any()) return;
+  last_read_cells_ += static_cast<size_t>((hi - lo).prod()) * kBlockVolume;
   for (int z = lo.z(); z < hi.z(); ++z)
     for (int y = lo.y(); y < hi.y(); ++y)
       for (int x = lo.x(); x < hi.x(); ++x) {
@@ -258,7 +295,6 @@ void DistanceField::readBlocks(const octomap::OcTree& map, const Eigen::Vector3i
       for (l.y() = from.y(); l.y() <= to.y(); ++l.y())
         for (l.x() = from.x(); l.x() <= to.x(); ++l.x()) classes_[cellIndex(l)] = cell_class;
   }
-  markEntered(lo, hi);
 }
 
 void DistanceField::markEntered(const Eigen::Vector3i& lo, const Eigen::Vector3i& hi) {

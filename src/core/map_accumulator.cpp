@@ -88,6 +88,14 @@ int tileOfBlock(int b) { return floorDiv(b, MapAccumulator::kTileCells / MapAccu
 uint64_t packedTileOf(const Eigen::Vector3i& b) {
   return packBlock(Eigen::Vector3i(tileOfBlock(b.x()), tileOfBlock(b.y()), tileOfBlock(b.z())));
 }
+/// The global cells of the leaf of @p key at @p depth in a tree of
+/// @p tree_depth whose key @p offset is global cell 0.
+CellBox leafCells(const octomap::OcTreeKey& key, unsigned depth, unsigned tree_depth, int offset) {
+  const int side = 1 << (tree_depth - depth);
+  Eigen::Vector3i first;
+  for (int a = 0; a < 3; ++a) first[a] = (static_cast<int>(key[a]) & ~(side - 1)) - offset;
+  return CellBox(first, first + Eigen::Vector3i::Constant(side - 1));
+}
 
 }  // namespace
 
@@ -126,6 +134,7 @@ void MapAccumulator::recordClassChanges(bool on) {
   if (!on) {
     class_log_.reset();
     classes_all_ = false;
+    class_regions_.clear();
     return;
   }
   if (class_log_) return;
@@ -134,15 +143,28 @@ void MapAccumulator::recordClassChanges(bool on) {
   classes_all_ = true;  // the caller has seen nothing yet
 }
 
-std::vector<CellClassChange> MapAccumulator::takeClassChanges(bool* all) {
+std::vector<CellClassChange> MapAccumulator::takeClassChanges(bool* all, std::vector<CellBox>* regions) {
   std::vector<CellClassChange> changes;
   *all = false;
+  regions->clear();
   if (!class_log_) return changes;
   *all = classes_all_;
-  if (!classes_all_) changes.swap(class_log_->changes);
+  if (!classes_all_) {
+    changes.swap(class_log_->changes);
+    regions->swap(class_regions_);
+  }
   class_log_->changes.clear();
+  class_regions_.clear();
   classes_all_ = false;
   return changes;
+}
+
+std::vector<CellClassChange> MapAccumulator::takeClassChanges(bool* all) {
+  std::vector<CellBox> regions;
+  std::vector<CellClassChange> changes = takeClassChanges(all, &regions);
+  if (regions.empty()) return changes;
+  *all = true;
+  return {};
 }
 
 void MapAccumulator::classesChangedEverywhere() {
@@ -150,6 +172,31 @@ void MapAccumulator::classesChangedEverywhere() {
   classes_all_ = true;
   class_log_->changes.clear();
   class_log_->overflowed = false;
+  class_regions_.clear();
+}
+
+void MapAccumulator::classesChangedIn(const CellBox& cells) {
+  if (!class_log_ || classes_all_ || cells.isEmpty()) return;
+  if (class_regions_.size() >= kMaxClassRegions) return classesChangedEverywhere();
+  class_regions_.push_back(cells);
+}
+
+void MapAccumulator::classesChangedOutside(const CellBox& kept, const std::vector<CellBox>& dropped_inside) {
+  if (kept.isEmpty()) return classesChangedEverywhere();
+  // The key range's cells minus the kept box: below and above it along x,
+  // then along y within its x range, then along z within its x and y ranges.
+  const int offset = static_cast<int>(tree_->coordToKey(0.0));
+  CellBox rest(Eigen::Vector3i::Constant(-offset), Eigen::Vector3i::Constant(offset - 1));
+  for (int a = 0; a < 3; ++a) {
+    CellBox below = rest, above = rest;
+    below.max()[a] = kept.min()[a] - 1;
+    above.min()[a] = kept.max()[a] + 1;
+    classesChangedIn(below);
+    classesChangedIn(above);
+    rest.min()[a] = std::max(rest.min()[a], kept.min()[a]);
+    rest.max()[a] = std::min(rest.max()[a], kept.max()[a]);
+  }
+  for (const CellBox& leaf : dropped_inside) classesChangedIn(leaf);
 }
 
 void MapAccumulator::reset() {
@@ -235,7 +282,14 @@ size_t MapAccumulator::clearBox(const Eigen::Vector3d& W_min, const Eigen::Vecto
     dirty_tiles_.insert(packedTileOf(b));
   }
   inner_stale_ = inner_stale_ || !cells.empty();
-  if (!cells.empty()) classesChangedEverywhere();
+  if (!cells.empty()) {
+    Eigen::Vector3i first, last;
+    for (int a = 0; a < 3; ++a) {
+      first[a] = key_lo[a] - offset;
+      last[a] = key_hi[a] - offset;
+    }
+    classesChangedIn(CellBox(first, last));
+  }
   return cells.size();
 }
 
@@ -381,6 +435,12 @@ size_t MapAccumulator::prune() {
     const Eigen::Array3d p(it.getX(), it.getY(), it.getZ());
     return (p >= lo).all() && (p <= hi).all();
   };
+  // The cells whose centres the kept box holds, one cell less on each side
+  // (rounding): a dropped leaf inside them is a coarse one that reaches in.
+  const int offset = static_cast<int>(tree_->coordToKey(0.0));
+  const CellBox kept_cells((lo / config_.resolution_m - 0.5).ceil().cast<int>().matrix() + Eigen::Vector3i::Ones(),
+                           (hi / config_.resolution_m - 0.5).floor().cast<int>().matrix() - Eigen::Vector3i::Ones());
+  std::vector<CellBox> dropped_inside;
   // The dropped leaves' blocks and tiles change (the outputs delete them); the rest do not.
   size_t outside = 0;
   for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it) {
@@ -388,9 +448,11 @@ size_t MapAccumulator::prune() {
     ++outside;
     if (!all_changed_) insertBlocksOf(it.getKey(), it.getDepth(), &changed_blocks_);
     insertBlocksOf(it.getKey(), it.getDepth(), &dirty_tiles_, kTileCells);
+    const CellBox cells = leafCells(it.getKey(), it.getDepth(), tree_->getTreeDepth(), offset);
+    if (!cells.intersection(kept_cells).isEmpty()) dropped_inside.push_back(cells);
   }
   if (outside == 0) return 0;
-  classesChangedEverywhere();
+  classesChangedOutside(kept_cells, dropped_inside);
   auto kept = std::make_unique<AccumulatingOcTree>(config_.resolution_m);
   for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it)
     if (inside(it)) kept->setLeaf(it.getKey(), it.getDepth(), it->getLogOdds());
@@ -501,7 +563,8 @@ size_t MapAccumulator::dropTile(const TileIndex& tile) {
   if (leaves == 0) return 0;
   tree_->dropNode(lo, kTileDepth);
   inner_stale_ = true;
-  classesChangedEverywhere();
+  const Eigen::Vector3i first = tile * kTileCells;
+  classesChangedIn(CellBox(first, first + Eigen::Vector3i::Constant(kTileCells - 1)));
   dirty_tiles_.erase(packBlock(tile));
   return leaves;
 }
@@ -511,7 +574,10 @@ void MapAccumulator::insertLeaves(const std::vector<Leaf>& leaves) {
   for (const Leaf& leaf : leaves) tree_->setLeaf(leaf.key, leaf.depth, std::clamp(leaf.log_odds, lo, hi));
   if (leaves.empty()) return;
   inner_stale_ = true;
-  classesChangedEverywhere();
+  const int offset = static_cast<int>(tree_->coordToKey(0.0));
+  CellBox cells;  // empty
+  for (const Leaf& leaf : leaves) cells.extend(leafCells(leaf.key, leaf.depth, tree_->getTreeDepth(), offset));
+  classesChangedIn(cells);
   if (all_changed_) return;
   for (const Leaf& leaf : leaves) insertBlocksOf(leaf.key, leaf.depth, &changed_blocks_);
 }

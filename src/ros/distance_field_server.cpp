@@ -247,12 +247,13 @@ void DistanceFieldServer::update() {
   if (fusion_->lastStamp().isZero()) return;  // no update fused yet: no vehicle position
   const ProcessingTimes::Start start = times_.start();
   bool all = false;
-  const std::vector<CellClassChange> changes = fusion_->takeClassChanges(&all);
+  std::vector<CellBox> regions;
+  const std::vector<CellClassChange> changes = fusion_->takeClassChanges(&all, &regions);
   all = all || read_whole_window_;
   read_whole_window_ = true;  // until this update has gone through
   const MapAccumulator& map = fusion_->map();
   field_->write([&](DistanceField& field, DistanceFieldInfo& info) {
-    field.update(map.tree(), changes, all, fusion_->lastSensorOrigin());
+    field.update(map.tree(), changes, regions, all, fusion_->lastSensorOrigin());
     info.frame_id = fusion_->frameId();
     info.stamp = fusion_->lastStamp();
     ++info.updates;

@@ -39,8 +39,9 @@ struct FieldScene {
   }
   void refresh(const Eigen::Vector3d& W_vehicle) {
     bool all = false;
-    const std::vector<CellClassChange> changes = map.takeClassChanges(&all);
-    field.update(map.tree(), changes, all, W_vehicle);
+    std::vector<CellBox> regions;
+    const std::vector<CellClassChange> changes = map.takeClassChanges(&all, &regions);
+    field.update(map.tree(), changes, regions, all, W_vehicle);
   }
   MapAccumulator map;
   DistanceField field;

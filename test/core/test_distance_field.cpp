@@ -240,6 +240,54 @@ TEST(DistanceField, WorkFollowsTheChanges) {
   EXPECT_EQ(scene.field.sample(Eigen::Vector3d(4.5, 4.5, 4.5) * kRes).distance_m, 0.0f);
 }
 
+// What changes the map besides the updates comes as regions: a prune far
+// from the window leaves every value as it was and reads nothing from the
+// map; a tile dropped inside the window (and loaded again) is read again,
+// only its part of the window, and the distances follow it exactly.
+TEST(DistanceField, RegionsReadOnlyTheirPartOfTheWindow) {
+  for (bool uio : {false, true}) {
+    SCOPED_TRACE(uio ? "unknown is occupied" : "unknown is free");
+    FieldScene scene(smallWindow(uio));
+    const Eigen::Vector3d W_vehicle(0.1, 0.1, 0.1);
+    std::mt19937 rng(12);
+    Eigen::Vector3i first, size;
+    windowAndMargin(W_vehicle, &first, &size);
+    ASSERT_TRUE(scene.integrate(randomUpdate(&rng, first, size, 0.3, 0.01), W_vehicle));
+    // Seen 300 m away (beyond max_extent_m = 200 m), then kPruneOrigins updates near the window.
+    ASSERT_TRUE(scene.integrate(randomUpdate(&rng, Eigen::Vector3i(1200, 0, 0), Eigen::Vector3i(8, 8, 8), 0.0, 0.5),
+                                W_vehicle));
+    const GridUpdate near = randomUpdate(&rng, Eigen::Vector3i(2, 2, 2), Eigen::Vector3i(2, 2, 2), 0.0, 0.5);
+    for (size_t i = 0; i < MapAccumulator::kPruneOrigins; ++i) ASSERT_TRUE(scene.integrate(near, W_vehicle));
+    ASSERT_TRUE(matchesBruteForce(scene));
+    const BruteForceField before(scene.field, scene.map.tree());
+    ASSERT_GT(scene.map.prune(), 0u);
+    scene.refresh(W_vehicle);
+    EXPECT_EQ(scene.field.lastReadCells(), 0u);
+    EXPECT_EQ(scene.field.lastUpdatedCells(), 0u);
+    EXPECT_TRUE(matchesBruteForce(scene));
+    const BruteForceField after(scene.field, scene.map.tree());
+    EXPECT_EQ(after.sq, before.sq);
+    // Tile 0 holds the window's positive octant: 2 x 2 x 1 of its 4 x 4 x 2 blocks.
+    const MapAccumulator::TileIndex tile(0, 0, 0);
+    const std::vector<MapAccumulator::Leaf> leaves = scene.map.tileLeaves(tile);
+    ASSERT_GT(scene.map.dropTile(tile), 0u);
+    scene.refresh(W_vehicle);
+    EXPECT_EQ(scene.field.lastReadCells(), 4u * 512u);
+    EXPECT_GT(scene.field.lastUpdatedCells(), 0u);
+    EXPECT_TRUE(matchesBruteForce(scene)) << "tile dropped";
+    scene.map.insertLeaves(leaves);
+    scene.refresh(W_vehicle);
+    EXPECT_EQ(scene.field.lastReadCells(), 4u * 512u);
+    EXPECT_TRUE(matchesBruteForce(scene)) << "tile loaded";
+    EXPECT_EQ(BruteForceField(scene.field, scene.map.tree()).sq, before.sq);
+    // A cleared box (cells -8 .. -1 on each axis) reads its one block only.
+    ASSERT_GT(scene.map.clearBox(Eigen::Vector3d(-2.0, -2.0, -2.0), Eigen::Vector3d(-0.1, -0.1, -0.1)), 0u);
+    scene.refresh(W_vehicle);
+    EXPECT_EQ(scene.field.lastReadCells(), 512u);
+    EXPECT_TRUE(matchesBruteForce(scene)) << "box cleared";
+  }
+}
+
 // --- queries ------------------------------------------------------------------
 
 namespace {

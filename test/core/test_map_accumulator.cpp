@@ -151,6 +151,86 @@ TEST(MapAccumulator, PruneKeepsTheMapWithinItsExtent) {
   EXPECT_EQ(changed[0], Eigen::Vector3i(12, 0, 0));  // cell 200 / 16
 }
 
+namespace {
+/// Whether one of @p regions holds the cell @p g.
+bool inRegions(const std::vector<CellBox>& regions, const Eigen::Vector3i& g) {
+  for (const CellBox& r : regions)
+    if (r.contains(g)) return true;
+  return false;
+}
+}  // namespace
+
+// What changes the map besides integrate() reports where (for the distance
+// field, which reads only those regions again): a prune the space outside
+// the box it kept, a dropped or loaded tile its box, a cleared box itself;
+// the class changes of updates before them are kept. A reset, and too many
+// regions, say all; the old call says all for any region.
+TEST(MapAccumulator, ClassChangeRegionsSayWhereTheMapChangedOtherwise) {
+  MapAccumulatorConfig cfg;
+  cfg.max_extent_m = 10.0;
+  MapAccumulator map(cfg);
+  map.recordClassChanges(true);
+  bool all = false;
+  std::vector<CellBox> regions;
+  map.takeClassChanges(&all, &regions);
+  EXPECT_TRUE(all);
+  ASSERT_TRUE(map.integrate(singleCell(Eigen::Vector3i(200, 0, 0), 1.0f)));  // 50 m away, pruned below
+  GridUpdate near = singleCell(Eigen::Vector3i(4, 0, 0), 1.0f);
+  near.W_sensor_origin = Eigen::Vector3d(1.0, 0.0, 0.0);
+  for (size_t i = 0; i < MapAccumulator::kPruneOrigins; ++i) ASSERT_TRUE(map.integrate(near));
+  map.takeClassChanges(&all, &regions);
+  ASSERT_TRUE(map.integrate(singleCell(Eigen::Vector3i(0, 0, 0), 1.0f)));  // a change before the prune
+  ASSERT_EQ(map.prune(), 1u);
+  std::vector<CellClassChange> changes = map.takeClassChanges(&all, &regions);
+  EXPECT_FALSE(all);
+  ASSERT_EQ(changes.size(), 1u);
+  EXPECT_EQ(changes[0].cell, Eigen::Vector3i(0, 0, 0));
+  EXPECT_EQ(regions.size(), 6u);  // the slabs around the kept box
+  EXPECT_TRUE(inRegions(regions, Eigen::Vector3i(200, 0, 0)));
+  EXPECT_TRUE(inRegions(regions, Eigen::Vector3i(0, 0, -200)));
+  for (const Eigen::Vector3i& kept : {Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(4, 0, 0), Eigen::Vector3i(30, 30, 30)})
+    EXPECT_FALSE(inRegions(regions, kept)) << kept.transpose();
+  // A tile dropped and loaded again.
+  const MapAccumulator::TileIndex tile(0, 0, 0);
+  const std::vector<MapAccumulator::Leaf> leaves = map.tileLeaves(tile);
+  ASSERT_EQ(leaves.size(), 2u);
+  ASSERT_EQ(map.dropTile(tile), 2u);
+  changes = map.takeClassChanges(&all, &regions);
+  EXPECT_FALSE(all);
+  EXPECT_TRUE(changes.empty());
+  ASSERT_EQ(regions.size(), 1u);
+  EXPECT_EQ(regions[0].min(), Eigen::Vector3i::Zero());
+  EXPECT_EQ(regions[0].max(), Eigen::Vector3i::Constant(MapAccumulator::kTileCells - 1));
+  map.insertLeaves(leaves);
+  map.takeClassChanges(&all, &regions);
+  ASSERT_EQ(regions.size(), 1u);
+  EXPECT_EQ(regions[0].min(), Eigen::Vector3i::Zero());  // the leaves' bounding box
+  EXPECT_EQ(regions[0].max(), Eigen::Vector3i(4, 0, 0));
+  // A cleared box: its cells.
+  EXPECT_EQ(map.clearBox(Eigen::Vector3d(0.9, -0.1, -0.1), Eigen::Vector3d(1.1, 0.1, 0.1)), 1u);
+  map.takeClassChanges(&all, &regions);
+  ASSERT_EQ(regions.size(), 1u);
+  EXPECT_TRUE(regions[0].contains(Eigen::Vector3i(4, 0, 0)));
+  EXPECT_FALSE(regions[0].contains(Eigen::Vector3i(0, 0, 0)));
+  // The old call: all for a region.
+  ASSERT_EQ(map.dropTile(tile), 2u);
+  EXPECT_TRUE(map.takeClassChanges(&all).empty());
+  EXPECT_TRUE(all);
+  // Too many regions give way to all.
+  for (size_t i = 0; i <= MapAccumulator::kMaxClassRegions / 2; ++i) {
+    map.insertLeaves(leaves);
+    ASSERT_EQ(map.dropTile(tile), 2u);
+  }
+  EXPECT_TRUE(map.takeClassChanges(&all, &regions).empty());
+  EXPECT_TRUE(all);
+  EXPECT_TRUE(regions.empty());
+  map.insertLeaves(leaves);
+  map.reset();
+  map.takeClassChanges(&all, &regions);
+  EXPECT_TRUE(all);
+  EXPECT_TRUE(regions.empty());
+}
+
 // One update far away (an empty one, or one cell 5 km off with its origin
 // beside it) cannot make prune() drop the map the vehicle is in.
 TEST(MapAccumulator, OneFarUpdateDoesNotPruneTheMap) {

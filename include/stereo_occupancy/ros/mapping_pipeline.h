@@ -171,8 +171,11 @@ class MapFusion {
     record_class_changes_ = true;
     mission_.live().recordClassChanges(true);
   }
-  /// MapAccumulator::takeClassChanges(): the cells whose class the fusion changed since the last call.
-  std::vector<CellClassChange> takeClassChanges(bool* all) { return mission_.live().takeClassChanges(all); }
+  /// MapAccumulator::takeClassChanges(): the cells whose class the fusion changed since the last call, and the
+  /// regions where anything else changed the live map (the mission's tiles, prune, clearBox).
+  std::vector<CellClassChange> takeClassChanges(bool* all, std::vector<CellBox>* regions) {
+    return mission_.live().takeClassChanges(all, regions);
+  }
   /// The camera centre of the last fused update, map frame [m] (the vehicle's position).
   const Eigen::Vector3d& lastSensorOrigin() const { return last_sensor_origin_; }
   /// The map's frame: world_frame, or (world_frame "") the first fused update's; "" before it.
