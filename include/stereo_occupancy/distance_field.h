@@ -100,7 +100,7 @@ class DistanceField {
 
   /// Edge of the blocks the window moves by and the updates recompute [cells].
   static constexpr int kBlockCells = 8;
-  /// Largest window (cells; 4 bytes of distance, 1 of class and 8 of
+  /// Largest window (cells; 4 bytes of distance, 1 of class and 4 or 8 of
   /// scratch each): the window's edges are rounded up to whole blocks.
   static constexpr size_t kMaxWindowCells = size_t{1} << 26;
 
@@ -238,17 +238,41 @@ class DistanceField {
   /// Marks the local blocks [lo, hi) for recomputation (without dilation).
   void markRecompute(const Eigen::Vector3i& lo, const Eigen::Vector3i& hi);
   void recompute();
-  void alongX(const Eigen::Vector3i& local_block);  // pass 1 into along_x_
-  void alongXScalar(const Eigen::Vector3i& local_block);
+  /// The separable transform's values [cells^2], each capped at
+  /// saturated_sq_ (which also says "no obstacle within reach"), and the
+  /// passes' scratch, in lanes of T: 16 bits while saturated_sq_ is at most
+  /// kMaxNarrowSq (a value plus a squared offset then fits a signed 16-bit
+  /// lane: twice the lanes per instruction of 32 bits, half the memory;
+  /// SSE2 has a 16-bit min, not a 32-bit one), else 32 bits.
+  template <typename T>
+  struct PassValues {
+    std::vector<T> x;            ///< pass 1: squared distance along x
+    std::vector<T> xy;           ///< pass 2: in the xy plane
+    std::vector<T> add_rows;     ///< row i (8 lanes): (i - reach_cells_)^2, what passes 2 and 3 add
+    std::vector<const T*> span;  ///< passes 2, 3: the blocks within reach along the pass's axis (null outside)
+    std::vector<const T*> rows;  ///< passes 2, 3: the span's rows (pass 2) or layers (pass 3), cell by cell
+  };
+  static constexpr uint32_t kMaxNarrowSq = 16383;
+  template <typename T>
+  void allocatePasses(size_t cells, PassValues<T>* values);
+  template <typename T>
+  void runPasses(PassValues<T>* values);
+  template <typename T>
+  void alongX(const Eigen::Vector3i& local_block, std::vector<T>* out);  // pass 1
+  template <typename T>
+  void alongXScalar(const Eigen::Vector3i& local_block, std::vector<T>* out);
   /// Pass 1 takes a row's span as one 64-bit word up to this reach [blocks].
   static constexpr int kMaxBitReachBlocks = 3;
-  void alongY(const Eigen::Vector3i& local_block);  // pass 2 into along_xy_
-  void alongZ(const Eigen::Vector3i& local_block);  // pass 3 into sq_
-  /// Points span_values_ at the blocks of @p values within the reach of
-  /// block @p b along @p axis (null outside the window); false if none of
-  /// them holds a value below kFar (@p finite) and the outside holds none.
-  bool gatherSpan(const Eigen::Vector3i& b, int axis, const std::vector<uint32_t>& values,
-                  const std::vector<uint8_t>& finite);
+  template <typename T>
+  void alongY(const Eigen::Vector3i& local_block, PassValues<T>* values);  // pass 2
+  template <typename T>
+  void alongZ(const Eigen::Vector3i& local_block, PassValues<T>* values);  // pass 3 into sq_
+  /// Points @p span at the blocks of @p values within the reach of block
+  /// @p b along @p axis (null outside the window); false if none of them
+  /// holds a value below saturated_sq_ (@p finite) and the outside holds none.
+  template <typename T>
+  bool gatherSpan(const Eigen::Vector3i& b, int axis, const std::vector<T>& values, const std::vector<uint8_t>& finite,
+                  std::vector<const T*>* span) const;
   Eigen::Vector3i blockOfLinear(int linear) const;
   int linearOfBlock(const Eigen::Vector3i& b) const {
     return b.x() + size_blocks_.x() * (b.y() + size_blocks_.y() * b.z());
@@ -277,19 +301,18 @@ class DistanceField {
   bool placed_ = false;           ///< an update() has placed the window
   /// Squared distances at or above it read as max_distance_m [cells^2].
   uint32_t saturated_sq_ = 0;
-  int reach_cells_ = 0;             ///< largest offset along one axis to an obstacle that is not saturated [cells]
-  int reach_blocks_ = 0;            ///< reach_cells_ in blocks, rounded up
-  float occupied_log_odds_ = 0.0f;  ///< the map's threshold (update())
-  std::vector<uint8_t> classes_;    ///< CellClass of each cell
-  std::vector<uint32_t> sq_;        ///< squared distance to the nearest obstacle, capped at saturated_sq_ [cells^2]
-  std::vector<uint32_t> along_x_;   ///< pass 1: squared distance along x (scratch)
-  std::vector<uint32_t> along_xy_;  ///< pass 2: in the xy plane (scratch)
-  std::vector<uint8_t> row_span_;   ///< pass 1: one row's obstacle flags with the reach on both sides (scratch)
-  std::vector<const uint8_t*> span_blocks_;   ///< pass 1: the class blocks of that span (scratch)
-  std::vector<const uint32_t*> span_values_;  ///< passes 2, 3: the blocks of the span (scratch)
-  std::vector<const uint32_t*> layers_;       ///< pass 3: the layers z - reach .. z + reach (scratch)
-  /// Per block: pass 1's / pass 2's values hold one below kFar (an obstacle
-  /// within reach), so that passes 2 and 3 skip the blocks far from any.
+  int reach_cells_ = 0;                 ///< largest offset along one axis to an obstacle that is not saturated [cells]
+  int reach_blocks_ = 0;                ///< reach_cells_ in blocks, rounded up
+  float occupied_log_odds_ = 0.0f;      ///< the map's threshold (update())
+  std::vector<uint8_t> classes_;        ///< CellClass of each cell
+  std::vector<uint32_t> sq_;            ///< squared distance to the nearest obstacle, capped at saturated_sq_ [cells^2]
+  bool narrow_ = false;                 ///< saturated_sq_ <= kMaxNarrowSq: the passes run in narrow_values_
+  PassValues<uint16_t> narrow_values_;  ///< (scratch)
+  PassValues<uint32_t> wide_values_;    ///< (scratch)
+  std::vector<uint8_t> row_span_;       ///< pass 1: one row's obstacle flags with the reach on both sides (scratch)
+  std::vector<const uint8_t*> span_blocks_;  ///< pass 1: the class blocks of that span (scratch)
+  /// Per block: pass 1's / pass 2's values hold one below saturated_sq_ (an
+  /// obstacle within reach), so that passes 2 and 3 skip the blocks far from any.
   std::vector<uint8_t> finite_x_, finite_xy_;
   std::vector<uint8_t> region_differed_;  ///< readRegion(): per block, differsFromOutside() before the read (scratch)
   // The blocks of one update (local linear indices) and their marks (mark == epoch_: in the list).

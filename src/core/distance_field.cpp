@@ -4,6 +4,11 @@
 #include <cstring>
 #include <limits>
 #include <stdexcept>
+#include <type_traits>
+
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include "stereo_occupancy/accumulating_octree.h"  // leafOverlaps
 
@@ -11,9 +16,6 @@ namespace stereo_occupancy {
 
 namespace {
 
-/// "No obstacle within reach" in the passes: above every real squared
-/// distance, and far from overflowing when the passes add k^2 twice.
-constexpr uint32_t kFar = uint32_t{1} << 30;
 /// The window re-centres when the vehicle is farther than this from its centre along an axis [blocks].
 constexpr double kRecentreBlocks = 1.0;
 /// Global cell index of OctoMap key 0 (the key of index 0 is 32768).
@@ -66,12 +68,13 @@ DistanceField::DistanceField(const DistanceFieldConfig& config, double resolutio
   classes_.assign(n, static_cast<uint8_t>(CellClass::kUnknown));
   // Everything unknown: an obstacle everywhere, or none.
   sq_.assign(n, config_.unknown_is_occupied ? 0u : saturated_sq_);
-  along_x_.assign(n, kFar);
-  along_xy_.assign(n, kFar);
+  narrow_ = saturated_sq_ <= kMaxNarrowSq;
+  if (narrow_)
+    allocatePasses(n, &narrow_values_);
+  else
+    allocatePasses(n, &wide_values_);
   row_span_.assign(static_cast<size_t>(kBlockCells + 2 * reach_blocks_ * kBlockCells), 0);
   span_blocks_.assign(static_cast<size_t>(2 * reach_blocks_ + 1), nullptr);
-  span_values_.assign(static_cast<size_t>(2 * reach_blocks_ + 1), nullptr);
-  layers_.assign(static_cast<size_t>(2 * reach_cells_ + 1), nullptr);
   finite_x_.assign(blocks, 0);
   finite_xy_.assign(blocks, 0);
   for (auto* marks : {&changed_mark_, &mark_x_, &mark_y_, &mark_z_}) marks->assign(blocks, 0);
@@ -371,9 +374,10 @@ void DistanceField::recompute() {
     dilate(blocks_z_, Eigen::Vector3i(0, 0, r), &mark_y_, &blocks_y_);
     dilate(blocks_y_, Eigen::Vector3i(0, r, 0), &mark_x_, &blocks_x_);
   }
-  for (int b : blocks_x_) alongX(blockOfLinear(b));
-  for (int b : blocks_y_) alongY(blockOfLinear(b));
-  for (int b : blocks_z_) alongZ(blockOfLinear(b));
+  if (narrow_)
+    runPasses(&narrow_values_);
+  else
+    runPasses(&wide_values_);
   last_updated_cells_ = blocks_z_.size() * kBlockVolume;
 }
 
@@ -393,14 +397,35 @@ inline uint64_t obstacleBits(const uint8_t* classes, bool unknown_is_occupied) {
 }
 }  // namespace
 
+template <typename T>
+void DistanceField::allocatePasses(size_t cells, PassValues<T>* values) {
+  const T cap = static_cast<T>(saturated_sq_);
+  values->x.assign(cells, cap);
+  values->xy.assign(cells, cap);
+  const int d = reach_cells_;
+  values->add_rows.clear();
+  for (int k = -d; k <= d; ++k) values->add_rows.insert(values->add_rows.end(), kBlockCells, static_cast<T>(k * k));
+  values->span.assign(static_cast<size_t>(2 * reach_blocks_ + 1), nullptr);
+  values->rows.assign(static_cast<size_t>(2 * reach_blocks_ * kBlockCells + kBlockCells), nullptr);
+}
+
+template <typename T>
+void DistanceField::runPasses(PassValues<T>* values) {
+  for (int b : blocks_x_) alongX(blockOfLinear(b), &values->x);
+  for (int b : blocks_y_) alongY(blockOfLinear(b), values);
+  for (int b : blocks_z_) alongZ(blockOfLinear(b), values);
+}
+
 // Pass 1: per row of a block, the distance along x to the nearest obstacle
 // within reach (squared), from the row's obstacle bits and the reach's on
 // both sides: the nearest set bit on each side of each cell.
-void DistanceField::alongX(const Eigen::Vector3i& b) {
+template <typename T>
+void DistanceField::alongX(const Eigen::Vector3i& b, std::vector<T>* values) {
   const int r = reach_blocks_, d = reach_cells_;
-  if (r > kMaxBitReachBlocks) return alongXScalar(b);
+  if (r > kMaxBitReachBlocks) return alongXScalar(b, values);
   const bool uio = config_.unknown_is_occupied;
-  uint32_t* out = &along_x_[slotOf(b) * kBlockVolume];
+  const T cap = static_cast<T>(saturated_sq_);
+  T* out = &(*values)[slotOf(b) * kBlockVolume];
   // The rows' obstacle bits of the span's blocks, left to right (all or
   // none outside the window).
   uint64_t words[kBlockCells * kBlockCells] = {};
@@ -420,9 +445,9 @@ void DistanceField::alongX(const Eigen::Vector3i& b) {
   bool any = false;                   // an obstacle within reach along x
   for (int row = 0; row < kBlockCells * kBlockCells; ++row) {
     const uint64_t w = words[row];
-    uint32_t* o = out + row * kBlockCells;
+    T* o = out + row * kBlockCells;
     if (w == 0) {
-      std::fill(o, o + kBlockCells, kFar);
+      std::fill(o, o + kBlockCells, cap);
       continue;
     }
     for (int x = 0; x < kBlockCells; ++x) {
@@ -432,7 +457,7 @@ void DistanceField::alongX(const Eigen::Vector3i& b) {
       if (left) dist = p - (63 - __builtin_clzll(left));
       const uint64_t right = w >> p;
       if (right) dist = std::min(dist, __builtin_ctzll(right));
-      o[x] = dist <= d ? static_cast<uint32_t>(dist * dist) : kFar;
+      o[x] = dist <= d ? static_cast<T>(dist * dist) : cap;
       any = any || dist <= d;
     }
   }
@@ -440,10 +465,12 @@ void DistanceField::alongX(const Eigen::Vector3i& b) {
 }
 
 // Pass 1 for reaches beyond kMaxBitReachBlocks: a scan of the row's flags.
-void DistanceField::alongXScalar(const Eigen::Vector3i& b) {
+template <typename T>
+void DistanceField::alongXScalar(const Eigen::Vector3i& b, std::vector<T>* values) {
   const int r = reach_blocks_, d = reach_cells_;
   const uint8_t outside = config_.unknown_is_occupied ? 1 : 0;
-  uint32_t* out = &along_x_[slotOf(b) * kBlockVolume];
+  const T cap = static_cast<T>(saturated_sq_);
+  T* out = &(*values)[slotOf(b) * kBlockVolume];
   const uint8_t** rows = span_blocks_.data();  // the class blocks of the span, null outside the window
   const int span_blocks = 2 * r + 1;
   for (int i = 0; i < span_blocks; ++i) {
@@ -474,9 +501,9 @@ void DistanceField::alongXScalar(const Eigen::Vector3i& b) {
       if (span[p]) next = p;
       if (p < first + kBlockCells) dist[p - first] = std::min(dist[p - first], next - p);
     }
-    uint32_t* o = out + row * kBlockCells;
+    T* o = out + row * kBlockCells;
     for (int x = 0; x < kBlockCells; ++x) {
-      o[x] = dist[x] <= d ? static_cast<uint32_t>(dist[x] * dist[x]) : kFar;
+      o[x] = dist[x] <= d ? static_cast<T>(dist[x] * dist[x]) : cap;
       any = any || dist[x] <= d;
     }
   }
@@ -484,20 +511,57 @@ void DistanceField::alongXScalar(const Eigen::Vector3i& b) {
 }
 
 namespace {
-/// acc = min(acc, values + k^2) over @p n lanes (vectorises).
-template <int n>
-inline void minPlus(uint32_t* acc, const uint32_t* values, uint32_t k2) {
-  // As signed lanes: every value stays below 2^31, and SSE2 compares signed
-  // 32-bit lanes only (unsigned ones cost two more instructions each).
-  int32_t* a = reinterpret_cast<int32_t*>(acc);
-  const int32_t* v = reinterpret_cast<const int32_t*>(values);
-  const int32_t k = static_cast<int32_t>(k2);
-  for (int i = 0; i < n; ++i) a[i] = std::min(a[i], v[i] + k);
+/// The core of passes 2 and 3, on the 8 lanes x of a row:
+/// out[x] = min(cap, min over i < n of rows[i][offset + x] + add[8 i + x]);
+/// true if any out[x] is below cap. Every value is at most cap and every
+/// add below it, so the sums fit the lanes as signed numbers (SSE2 compares
+/// signed lanes only). The scalar version, for any width (32-bit lanes, and
+/// 16-bit ones without SSE2: compilers vectorise it, e.g. with NEON).
+template <typename T>
+inline bool minPlusRowsScalar(const T* const* rows, size_t offset, const T* add, int n, T cap, T* out) {
+  using Signed = std::make_signed_t<T>;
+  Signed acc[DistanceField::kBlockCells];
+  std::fill(acc, acc + DistanceField::kBlockCells, static_cast<Signed>(cap));
+  for (int i = 0; i < n; ++i) {
+    const T* row = rows[i] + offset;
+    const T* k = add + i * DistanceField::kBlockCells;
+    for (int x = 0; x < DistanceField::kBlockCells; ++x) acc[x] = std::min(acc[x], static_cast<Signed>(row[x] + k[x]));
+  }
+  bool any = false;
+  for (int x = 0; x < DistanceField::kBlockCells; ++x) {
+    out[x] = static_cast<T>(acc[x]);
+    any = any || out[x] < cap;
+  }
+  return any;
+}
+
+inline bool minPlusRows(const uint32_t* const* rows, size_t offset, const uint32_t* add, int n, uint32_t cap,
+                        uint32_t* out) {
+  return minPlusRowsScalar(rows, offset, add, n, cap, out);
+}
+
+inline bool minPlusRows(const uint16_t* const* rows, size_t offset, const uint16_t* add, int n, uint16_t cap,
+                        uint16_t* out) {
+#ifdef __SSE2__
+  static_assert(DistanceField::kBlockCells * sizeof(uint16_t) == sizeof(__m128i), "a row is one register");
+  const __m128i c = _mm_set1_epi16(static_cast<int16_t>(cap));
+  __m128i acc = c;
+  for (int i = 0; i < n; ++i) {
+    const __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(rows[i] + offset));
+    const __m128i k = _mm_loadu_si128(reinterpret_cast<const __m128i*>(add + i * DistanceField::kBlockCells));
+    acc = _mm_min_epi16(acc, _mm_add_epi16(v, k));
+  }
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(out), acc);
+  return _mm_movemask_epi8(_mm_cmplt_epi16(acc, c)) != 0;
+#else
+  return minPlusRowsScalar(rows, offset, add, n, cap, out);
+#endif
 }
 }  // namespace
 
-bool DistanceField::gatherSpan(const Eigen::Vector3i& b, int axis, const std::vector<uint32_t>& values,
-                               const std::vector<uint8_t>& finite) {
+template <typename T>
+bool DistanceField::gatherSpan(const Eigen::Vector3i& b, int axis, const std::vector<T>& values,
+                               const std::vector<uint8_t>& finite, std::vector<const T*>* span) const {
   const int r = reach_blocks_;
   // Unknown outside is an obstacle: the outside's rows hold 0.
   bool any = config_.unknown_is_occupied && (b[axis] - r < 0 || b[axis] + r >= size_blocks_[axis]);
@@ -505,11 +569,11 @@ bool DistanceField::gatherSpan(const Eigen::Vector3i& b, int axis, const std::ve
     Eigen::Vector3i n = b;
     n[axis] += i - r;
     if (n[axis] < 0 || n[axis] >= size_blocks_[axis]) {
-      span_values_[static_cast<size_t>(i)] = nullptr;
+      (*span)[static_cast<size_t>(i)] = nullptr;
       continue;
     }
     const size_t slot = slotOf(n);
-    span_values_[static_cast<size_t>(i)] = &values[slot * kBlockVolume];
+    (*span)[static_cast<size_t>(i)] = &values[slot * kBlockVolume];
     any = any || finite[slot];
   }
   return any;
@@ -517,69 +581,60 @@ bool DistanceField::gatherSpan(const Eigen::Vector3i& b, int axis, const std::ve
 
 // Pass 2: g(x, y) = min over |k| <= reach of pass 1's g(x, y + k) + k^2,
 // each row of 8 cells at once.
-void DistanceField::alongY(const Eigen::Vector3i& b) {
+template <typename T>
+void DistanceField::alongY(const Eigen::Vector3i& b, PassValues<T>* values) {
   const int d = reach_cells_, first = reach_blocks_ * kBlockCells;
+  const T cap = static_cast<T>(saturated_sq_);
   const size_t slot = slotOf(b);
-  uint32_t* out = &along_xy_[slot * kBlockVolume];
-  if (!gatherSpan(b, 1, along_x_, finite_x_)) {  // no obstacle within reach: nothing to do
-    std::fill(out, out + kBlockVolume, kFar);
+  T* out = &values->xy[slot * kBlockVolume];
+  if (!gatherSpan(b, 1, values->x, finite_x_, &values->span)) {  // no obstacle within reach: nothing to do
+    std::fill(out, out + kBlockVolume, cap);
     finite_xy_[slot] = 0;
     return;
   }
-  const uint32_t outside = config_.unknown_is_occupied ? 0u : kFar;
-  const uint32_t outside_row[kBlockCells] = {outside, outside, outside, outside, outside, outside, outside, outside};
-  uint32_t any = kFar;
-  for (int z = 0; z < kBlockCells; ++z)
-    for (int y = 0; y < kBlockCells; ++y) {
-      uint32_t acc[kBlockCells];
-      std::fill(acc, acc + kBlockCells, kFar);
-      for (int k = -d; k <= d; ++k) {
-        const int yy = first + y + k;  // in the span
-        const uint32_t* block = span_values_[static_cast<size_t>(yy >> kBlockShift)];
-        const uint32_t* row =
-            block ? block + ((z << (2 * kBlockShift)) | ((yy & (kBlockCells - 1)) << kBlockShift)) : outside_row;
-        minPlus<kBlockCells>(acc, row, static_cast<uint32_t>(k * k));
-      }
-      uint32_t* o = out + ((z << (2 * kBlockShift)) | (y << kBlockShift));
-      for (int x = 0; x < kBlockCells; ++x) {
-        o[x] = acc[x];
-        any = std::min(any, acc[x]);
-      }
+  T outside_row[kBlockCells];
+  std::fill(outside_row, outside_row + kBlockCells, config_.unknown_is_occupied ? T{0} : cap);
+  const T** rows = values->rows.data();  // the span's rows at this z, by their y in the span
+  bool any = false;
+  for (int z = 0; z < kBlockCells; ++z) {
+    for (int yy = first - d; yy < first + kBlockCells + d; ++yy) {
+      const T* block = values->span[static_cast<size_t>(yy >> kBlockShift)];
+      rows[yy] = block ? block + ((z << (2 * kBlockShift)) | ((yy & (kBlockCells - 1)) << kBlockShift)) : outside_row;
     }
-  finite_xy_[slot] = any < kFar ? 1 : 0;
+    for (int y = 0; y < kBlockCells; ++y) {
+      T* o = out + ((z << (2 * kBlockShift)) | (y << kBlockShift));
+      any = minPlusRows(rows + first + y - d, 0, values->add_rows.data(), 2 * d + 1, cap, o) || any;
+    }
+  }
+  finite_xy_[slot] = any ? 1 : 0;
 }
 
 // Pass 3: along z from pass 2, 8 cells (a row) at a time as pass 2, capped
 // where distances saturate.
-void DistanceField::alongZ(const Eigen::Vector3i& b) {
+template <typename T>
+void DistanceField::alongZ(const Eigen::Vector3i& b, PassValues<T>* values) {
   const int d = reach_cells_, first = reach_blocks_ * kBlockCells;
+  const T cap = static_cast<T>(saturated_sq_);
   uint32_t* out = &sq_[slotOf(b) * kBlockVolume];
-  if (!gatherSpan(b, 2, along_xy_, finite_xy_)) {
+  if (!gatherSpan(b, 2, values->xy, finite_xy_, &values->span)) {
     std::fill(out, out + kBlockVolume, saturated_sq_);
     return;
   }
-  const uint32_t outside = config_.unknown_is_occupied ? 0u : kFar;
-  const uint32_t outside_layer[kBlockCells * kBlockCells] = {};
-  static_assert(kBlockCells * kBlockCells == 64, "one layer");
-  uint32_t far_layer[kBlockCells * kBlockCells];
-  std::fill(far_layer, far_layer + kBlockCells * kBlockCells, kFar);
-  for (int z = 0; z < kBlockCells; ++z) {
-    // The layers z + k, k in [-d, d]: pass 2's, or the outside's.
-    for (int k = -d; k <= d; ++k) {
-      const int zz = first + z + k;
-      const uint32_t* block = span_values_[static_cast<size_t>(zz >> kBlockShift)];
-      layers_[static_cast<size_t>(k + d)] =
-          block ? block + ((zz & (kBlockCells - 1)) << (2 * kBlockShift)) : (outside == 0u ? outside_layer : far_layer);
-    }
-    for (int row = 0; row < kBlockCells * kBlockCells; row += kBlockCells) {
-      uint32_t acc[kBlockCells];
-      std::fill(acc, acc + kBlockCells, kFar);
-      for (int k = -d; k <= d; ++k)
-        minPlus<kBlockCells>(acc, layers_[static_cast<size_t>(k + d)] + row, static_cast<uint32_t>(k * k));
-      uint32_t* o = out + z * kBlockCells * kBlockCells + row;
-      for (int x = 0; x < kBlockCells; ++x) o[x] = std::min(acc[x], saturated_sq_);
-    }
+  constexpr int kLayer = kBlockCells * kBlockCells;
+  T outside_layer[kLayer];
+  std::fill(outside_layer, outside_layer + kLayer, config_.unknown_is_occupied ? T{0} : cap);
+  const T** layers = values->rows.data();  // the span's layers, by their z in the span
+  for (int zz = first - d; zz < first + kBlockCells + d; ++zz) {
+    const T* block = values->span[static_cast<size_t>(zz >> kBlockShift)];
+    layers[zz] = block ? block + ((zz & (kBlockCells - 1)) << (2 * kBlockShift)) : outside_layer;
   }
+  for (int z = 0; z < kBlockCells; ++z)
+    for (int row = 0; row < kLayer; row += kBlockCells) {
+      T acc[kBlockCells];
+      minPlusRows(layers + first + z - d, static_cast<size_t>(row), values->add_rows.data(), 2 * d + 1, cap, acc);
+      uint32_t* o = out + z * kLayer + row;
+      for (int x = 0; x < kBlockCells; ++x) o[x] = acc[x];
+    }
 }
 
 // --- queries ------------------------------------------------------------------

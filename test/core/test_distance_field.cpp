@@ -181,6 +181,73 @@ TEST(DistanceField, LongReachEqualsTheBruteForce) {
   }
 }
 
+// Squared distances beyond what the passes' 16-bit lanes hold (20 m at
+// 0.1 m: 40000 cells^2) go through 32-bit lanes: read whole, then updated
+// from class changes, against a brute force over the window's obstacles.
+TEST(DistanceField, WideLanesEqualTheBruteForce) {
+  constexpr double kFine = 0.1;
+  for (bool uio : {false, true}) {
+    DistanceFieldConfig config;
+    config.window_xy_m = 1.6;
+    config.window_z_m = 1.6;
+    config.max_distance_m = 20.0;
+    config.unknown_is_occupied = uio;
+    MapAccumulatorConfig map_config;
+    map_config.resolution_m = kFine;
+    MapAccumulator map(map_config);
+    map.recordClassChanges(true);
+    DistanceField field(config, kFine);
+    const Eigen::Vector3d W_vehicle(0.01, 0.01, 0.01);
+    std::mt19937 rng(uio ? 5 : 6);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    for (int round = 0; round < 2; ++round) {
+      LocalGrid grid;
+      grid.reset(Eigen::Vector3i(-12, -12, -12), Eigen::Vector3i(24, 24, 24), kFine);
+      for (int z = 0; z < 24; ++z)
+        for (int y = 0; y < 24; ++y)
+          for (int x = 0; x < 24; ++x)
+            if (u(rng) > 0.2) grid.at(x, y, z) = u(rng) < 0.01 ? 2.0f : -2.0f;
+      GridUpdate update;
+      encodeGridUpdate(grid, W_vehicle, &update);
+      ASSERT_TRUE(map.integrate(update));
+      bool all = false;
+      std::vector<CellBox> regions;
+      const std::vector<CellClassChange> changes = map.takeClassChanges(&all, &regions);
+      EXPECT_EQ(all, round == 0);
+      field.update(map.tree(), changes, regions, all, W_vehicle);
+      // The brute force: the nearest obstacle cell of the window, or the outside's nearest cell.
+      const Eigen::Vector3i first = (field.window().min() / kFine).array().round().cast<int>();
+      const Eigen::Vector3i size = (field.window().sizes() / kFine).array().round().cast<int>();
+      ASSERT_EQ(size, Eigen::Vector3i(16, 16, 16));
+      std::vector<Eigen::Vector3i> obstacles;
+      for (int z = 0; z < size.z(); ++z)
+        for (int y = 0; y < size.y(); ++y)
+          for (int x = 0; x < size.x(); ++x) {
+            const CellClass c = classInTree(map.tree(), first + Eigen::Vector3i(x, y, z));
+            if (c == CellClass::kOccupied || (uio && c == CellClass::kUnknown)) obstacles.emplace_back(x, y, z);
+          }
+      ASSERT_FALSE(obstacles.empty());
+      const int saturated_sq = 40000;
+      size_t wrong = 0;
+      for (int z = 0; z < size.z(); ++z)
+        for (int y = 0; y < size.y(); ++y)
+          for (int x = 0; x < size.x(); ++x) {
+            const Eigen::Vector3i l(x, y, z);
+            int best = saturated_sq;
+            for (const Eigen::Vector3i& o : obstacles) best = std::min(best, (o - l).squaredNorm());
+            for (int a = 0; a < 3 && uio; ++a) {
+              const int step = std::min(l[a] + 1, size[a] - l[a]);
+              best = std::min(best, step * step);
+            }
+            const float expected = best >= saturated_sq ? 20.0f : std::sqrt(static_cast<float>(best)) * 0.1f;
+            const Eigen::Vector3d W_centre = ((first + l).cast<double>() + Eigen::Vector3d::Constant(0.5)) * kFine;
+            wrong += field.sample(W_centre).distance_m != expected;
+          }
+      EXPECT_EQ(wrong, 0u) << "unknown_is_occupied " << uio << ", round " << round;
+    }
+  }
+}
+
 // Obstacles on the window's faces, edges and corners and just beyond them, in
 // a map known everywhere: those beyond do not count (unknown is not occupied)
 // or the whole outside does (unknown is occupied), as the brute force says.
