@@ -190,7 +190,7 @@ class DistanceField {
     }
     return static_cast<size_t>(s[0]) + static_cast<size_t>(size_blocks_[0]) * (s[1] + size_blocks_[1] * s[2]);
   }
-  /// Index of the local cell @p l (inside the window) in classes_ and sq_.
+  /// Index of the local cell @p l (inside the window) in classes_ and cells_.
   size_t cellIndex(const Eigen::Vector3i& l) const {
     const size_t in_block =
         static_cast<size_t>(((l.z() & (kBlockCells - 1)) << (2 * kBlockShift)) |
@@ -205,8 +205,14 @@ class DistanceField {
     return cell_class == static_cast<uint8_t>(CellClass::kOccupied) ||
            (config_.unknown_is_occupied && cell_class == static_cast<uint8_t>(CellClass::kUnknown));
   }
-  /// Distance of a stored squared distance [m].
-  float distanceOf(uint32_t sq) const {
+  /// A cell's word in cells_: its squared distance below kClassShift, its class above.
+  static constexpr int kClassShift = 30;
+  static constexpr uint32_t kSqMask = (uint32_t{1} << kClassShift) - 1;
+  static uint32_t sqOf(uint32_t word) { return word & kSqMask; }
+  static uint8_t classOf(uint32_t word) { return static_cast<uint8_t>(word >> kClassShift); }
+  /// Distance of a cell's word [m].
+  float distanceOf(uint32_t word) const {
+    const uint32_t sq = sqOf(word);
     return sq >= saturated_sq_ ? static_cast<float>(config_.max_distance_m)
                                : std::sqrt(static_cast<float>(sq)) * static_cast<float>(resolution_m_);
   }
@@ -266,7 +272,7 @@ class DistanceField {
   template <typename T>
   void alongY(const Eigen::Vector3i& local_block, PassValues<T>* values);  // pass 2
   template <typename T>
-  void alongZ(const Eigen::Vector3i& local_block, PassValues<T>* values);  // pass 3 into sq_
+  void alongZ(const Eigen::Vector3i& local_block, PassValues<T>* values);  // pass 3 into cells_
   /// Points @p span at the blocks of @p values within the reach of block
   /// @p b along @p axis (null outside the window); false if none of them
   /// holds a value below saturated_sq_ (@p finite) and the outside holds none.
@@ -301,11 +307,14 @@ class DistanceField {
   bool placed_ = false;           ///< an update() has placed the window
   /// Squared distances at or above it read as max_distance_m [cells^2].
   uint32_t saturated_sq_ = 0;
-  int reach_cells_ = 0;                 ///< largest offset along one axis to an obstacle that is not saturated [cells]
-  int reach_blocks_ = 0;                ///< reach_cells_ in blocks, rounded up
-  float occupied_log_odds_ = 0.0f;      ///< the map's threshold (update())
-  std::vector<uint8_t> classes_;        ///< CellClass of each cell
-  std::vector<uint32_t> sq_;            ///< squared distance to the nearest obstacle, capped at saturated_sq_ [cells^2]
+  int reach_cells_ = 0;             ///< largest offset along one axis to an obstacle that is not saturated [cells]
+  int reach_blocks_ = 0;            ///< reach_cells_ in blocks, rounded up
+  float occupied_log_odds_ = 0.0f;  ///< the map's threshold (update())
+  std::vector<uint8_t> classes_;    ///< CellClass of each cell, for the passes and the reads (8 a word)
+  /// Per cell, what the queries read in one load: the squared distance to
+  /// the nearest obstacle, capped at saturated_sq_ [cells^2] (sqOf()), and
+  /// the class, as in classes_ (classOf()).
+  std::vector<uint32_t> cells_;
   bool narrow_ = false;                 ///< saturated_sq_ <= kMaxNarrowSq: the passes run in narrow_values_
   PassValues<uint16_t> narrow_values_;  ///< (scratch)
   PassValues<uint32_t> wide_values_;    ///< (scratch)

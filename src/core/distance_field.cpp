@@ -57,7 +57,12 @@ DistanceField::DistanceField(const DistanceFieldConfig& config, double resolutio
   // integer c with sqrt(c) * resolution >= max_distance_m. Every squared
   // distance below it has each axis offset at most reach_cells_.
   const double reach = config_.max_distance_m / resolution_m;
-  saturated_sq_ = static_cast<uint32_t>(std::max(1.0, std::ceil(reach * reach * (1.0 - 1e-12))));
+  const double saturated_sq = std::max(1.0, std::ceil(reach * reach * (1.0 - 1e-12)));
+  // Unreachable within kMaxWindowCells and the ranges of max_distance_m; cells_ holds it in kClassShift bits.
+  if (saturated_sq > static_cast<double>(kSqMask))
+    throw std::invalid_argument("distance field: max_distance_m is too many cells of " + std::to_string(resolution_m) +
+                                " m");
+  saturated_sq_ = static_cast<uint32_t>(saturated_sq);
   reach_cells_ = static_cast<int>(std::floor(std::sqrt(static_cast<double>(saturated_sq_ - 1))));
   while (static_cast<uint32_t>(reach_cells_ * reach_cells_) > saturated_sq_ - 1) --reach_cells_;
   while (static_cast<uint32_t>((reach_cells_ + 1) * (reach_cells_ + 1)) <= saturated_sq_ - 1) ++reach_cells_;
@@ -67,7 +72,8 @@ DistanceField::DistanceField(const DistanceFieldConfig& config, double resolutio
   const size_t blocks = n / kBlockVolume;
   classes_.assign(n, static_cast<uint8_t>(CellClass::kUnknown));
   // Everything unknown: an obstacle everywhere, or none.
-  sq_.assign(n, config_.unknown_is_occupied ? 0u : saturated_sq_);
+  static_assert(static_cast<uint32_t>(CellClass::kUnknown) == 0, "cells_ starts unknown");
+  cells_.assign(n, config_.unknown_is_occupied ? 0u : saturated_sq_);
   narrow_ = saturated_sq_ <= kMaxNarrowSq;
   if (narrow_)
     allocatePasses(n, &narrow_values_);
@@ -321,9 +327,11 @@ void DistanceField::applyChanges(const std::vector<CellClassChange>& changes) {
   for (const CellClassChange& c : changes) {
     const Eigen::Vector3i l = c.cell - origin_cell;
     if (!inside(l)) continue;  // read from the map when it enters
-    uint8_t& cell_class = classes_[cellIndex(l)];
+    const size_t index = cellIndex(l);
+    uint8_t& cell_class = classes_[index];
     const uint8_t now = static_cast<uint8_t>(c.now);
     if (cell_class == now) continue;
+    cells_[index] = sqOf(cells_[index]) | (uint32_t{now} << kClassShift);  // the distance follows if it moves
     // Only a change of obstacle status moves distances (unknown -> free, the
     // most common, does not unless unknown is occupied).
     const bool moved = isObstacle(cell_class) != isObstacle(now);
@@ -615,9 +623,11 @@ template <typename T>
 void DistanceField::alongZ(const Eigen::Vector3i& b, PassValues<T>* values) {
   const int d = reach_cells_, first = reach_blocks_ * kBlockCells;
   const T cap = static_cast<T>(saturated_sq_);
-  uint32_t* out = &sq_[slotOf(b) * kBlockVolume];
+  const size_t slot = slotOf(b);
+  uint32_t* out = &cells_[slot * kBlockVolume];
+  const uint8_t* classes = &classes_[slot * kBlockVolume];
   if (!gatherSpan(b, 2, values->xy, finite_xy_, &values->span)) {
-    std::fill(out, out + kBlockVolume, saturated_sq_);
+    for (int i = 0; i < kBlockVolume; ++i) out[i] = saturated_sq_ | (uint32_t{classes[i]} << kClassShift);
     return;
   }
   constexpr int kLayer = kBlockCells * kBlockCells;
@@ -633,7 +643,8 @@ void DistanceField::alongZ(const Eigen::Vector3i& b, PassValues<T>* values) {
       T acc[kBlockCells];
       minPlusRows(layers + first + z - d, static_cast<size_t>(row), values->add_rows.data(), 2 * d + 1, cap, acc);
       uint32_t* o = out + z * kLayer + row;
-      for (int x = 0; x < kBlockCells; ++x) o[x] = acc[x];
+      const uint8_t* c = classes + z * kLayer + row;
+      for (int x = 0; x < kBlockCells; ++x) o[x] = acc[x] | (uint32_t{c[x]} << kClassShift);
     }
 }
 
@@ -648,10 +659,10 @@ DistanceSample DistanceField::sample(const Eigen::Vector3d& W_point) const {
   }
   s.in_window = true;
   const size_t index = cellIndex(l);
-  s.cell_class = static_cast<CellClass>(classes_[index]);
-  const uint32_t sq = sq_[index];
-  s.distance_m = distanceOf(sq);
-  if (sq >= saturated_sq_) return s;  // flat: no gradient
+  const uint32_t word = cells_[index];  // one load: the class and the distance
+  s.cell_class = static_cast<CellClass>(classOf(word));
+  s.distance_m = distanceOf(word);
+  if (sqOf(word) >= saturated_sq_) return s;  // flat: no gradient
   const float res = static_cast<float>(resolution_m_);
   for (int a = 0; a < 3; ++a) {
     // Central differences; one-sided at the window's edges. A neighbour in
@@ -663,13 +674,13 @@ DistanceSample DistanceField::sample(const Eigen::Vector3d& W_point) const {
     if (l[a] > 0) {
       Eigen::Vector3i n = l;
       --n[a];
-      lo = distanceOf(sq_[in_block > 0 ? index - stride : cellIndex(n)]);
+      lo = distanceOf(cells_[in_block > 0 ? index - stride : cellIndex(n)]);
       cells += 1.0f;
     }
     if (l[a] + 1 < size_cells_[a]) {
       Eigen::Vector3i n = l;
       ++n[a];
-      hi = distanceOf(sq_[in_block < kBlockCells - 1 ? index + stride : cellIndex(n)]);
+      hi = distanceOf(cells_[in_block < kBlockCells - 1 ? index + stride : cellIndex(n)]);
       cells += 1.0f;
     }
     if (cells > 0.0f) s.gradient[a] = (hi - lo) / (cells * res);
@@ -801,11 +812,12 @@ PathCheckResult DistanceField::checkPath(const std::vector<Eigen::Vector3d>& W_w
     if (!crosses) continue;
     Eigen::Vector3i next;
     walk(a, b, t_in, t_out, &next, [&](const Eigen::Vector3i& l, double t) {
-      const size_t index = cellIndex(l);
-      const bool known = classes_[index] != static_cast<uint8_t>(CellClass::kUnknown);
-      const double d = distanceOf(sq_[index]);
+      const uint32_t word = cells_[cellIndex(l)];
+      const uint8_t cell_class = classOf(word);
+      const bool known = cell_class != static_cast<uint8_t>(CellClass::kUnknown);
+      const double d = distanceOf(word);
       if (known) min_clearance_m = std::min(min_clearance_m, d);
-      if (classes_[index] == static_cast<uint8_t>(CellClass::kOccupied) || d < radius_m) {
+      if (cell_class == static_cast<uint8_t>(CellClass::kOccupied) || d < radius_m) {
         blocked = true;
         result.first_segment = static_cast<long>(i);
         result.W_point = a + t * (b - a);
@@ -840,7 +852,7 @@ RayCastResult DistanceField::castRay(const Eigen::Vector3d& W_origin, const Eige
   }
   Eigen::Vector3i next;
   const bool walked = walk(W_origin, W_end, t_in, t_out, &next, [&](const Eigen::Vector3i& l, double t) {
-    const uint8_t c = classes_[cellIndex(l)];
+    const uint8_t c = classOf(cells_[cellIndex(l)]);
     if (c == static_cast<uint8_t>(CellClass::kFree)) return true;
     result.verdict = c == static_cast<uint8_t>(CellClass::kOccupied) ? RayVerdict::kHit : RayVerdict::kUnknown;
     result.W_point = centreOf(l);
@@ -870,10 +882,10 @@ void DistanceField::slice(double z_m, std::vector<Eigen::Vector3f>* W_centres, s
   Eigen::Vector3i l(0, 0, lz);
   for (l.y() = 0; l.y() < size_cells_.y(); ++l.y())
     for (l.x() = 0; l.x() < size_cells_.x(); ++l.x()) {
-      const size_t index = cellIndex(l);
-      if (classes_[index] == static_cast<uint8_t>(CellClass::kUnknown)) continue;
+      const uint32_t word = cells_[cellIndex(l)];
+      if (classOf(word) == static_cast<uint8_t>(CellClass::kUnknown)) continue;
       W_centres->push_back(centreOf(l).cast<float>());
-      distances_m->push_back(distanceOf(sq_[index]));
+      distances_m->push_back(distanceOf(word));
     }
 }
 
