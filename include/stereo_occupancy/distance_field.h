@@ -121,6 +121,8 @@ class DistanceField {
   /// Cells outside the window count as unknown: obstacles if
   /// unknown_is_occupied (cells near the window's edge are then near an
   /// obstacle), else not (distances near the edge ignore what lies beyond).
+  /// Reads @p map's leaves only: its inner nodes may lag
+  /// (MapAccumulator::leafTree()).
   /// @throws std::invalid_argument if @p map's resolution is not the field's.
   void update(const octomap::OcTree& map, const std::vector<CellClassChange>& changes, bool all,
               const Eigen::Vector3d& W_vehicle) {

@@ -79,6 +79,11 @@ class MapAccumulator {
   const MapAccumulatorConfig& config() const { return config_; }
   /// The map, its inner nodes brought up to date first.
   const octomap::OcTree& tree() const;
+  /// The map as the fusion left it: its leaves current, its inner nodes'
+  /// values perhaps not (tree() updates them in a pass over the whole tree).
+  /// For readers of leaves only (the distance field), so that they do not
+  /// pay that pass after every update.
+  const octomap::OcTree& leafTree() const;
 
   /// True if integrate() would take @p update: consistent (GridUpdateView::isConsistent),
   /// of the map's resolution, a box of at most max_update_cells cells that lies

@@ -57,6 +57,8 @@ const octomap::OcTree& MapAccumulator::tree() const {
   return *tree_;
 }
 
+const octomap::OcTree& MapAccumulator::leafTree() const { return *tree_; }
+
 void MapAccumulator::applyThresholds() {
   tree_->setClampingThresMin(config_.clamping_min_prob);
   tree_->setClampingThresMax(config_.clamping_max_prob);

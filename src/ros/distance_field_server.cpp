@@ -253,7 +253,8 @@ void DistanceFieldServer::update() {
   read_whole_window_ = true;  // until this update has gone through
   const MapAccumulator& map = fusion_->map();
   field_->write([&](DistanceField& field, DistanceFieldInfo& info) {
-    field.update(map.tree(), changes, regions, all, fusion_->lastSensorOrigin());
+    // The leaves only: the inner nodes' pass over the whole tree waits for the outputs that read them.
+    field.update(map.leafTree(), changes, regions, all, fusion_->lastSensorOrigin());
     info.frame_id = fusion_->frameId();
     info.stamp = fusion_->lastStamp();
     ++info.updates;

@@ -41,7 +41,7 @@ struct FieldScene {
     bool all = false;
     std::vector<CellBox> regions;
     const std::vector<CellClassChange> changes = map.takeClassChanges(&all, &regions);
-    field.update(map.tree(), changes, regions, all, W_vehicle);
+    field.update(map.leafTree(), changes, regions, all, W_vehicle);  // as the ROS glue does
   }
   MapAccumulator map;
   DistanceField field;
