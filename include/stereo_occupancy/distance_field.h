@@ -115,7 +115,7 @@ class DistanceField {
   /// Brings the field up to date after a fused update: re-centres the window
   /// on @p W_vehicle (in whole blocks; the cells that enter are read from
   /// @p map), applies @p changes and recomputes the distances they can
-  /// change. @p all: the map changed everywhere (load, reset, clear, prune):
+  /// change. @p all: the map changed everywhere (load, reset):
   /// the window is read from @p map again. Work follows the changes.
   /// A NaN / infinite @p W_vehicle leaves the window where it is.
   /// Cells outside the window count as unknown: obstacles if
