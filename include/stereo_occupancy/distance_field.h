@@ -254,11 +254,12 @@ class DistanceField {
   /// SSE2 has a 16-bit min, not a 32-bit one), else 32 bits.
   template <typename T>
   struct PassValues {
-    std::vector<T> x;            ///< pass 1: squared distance along x
-    std::vector<T> xy;           ///< pass 2: in the xy plane
-    std::vector<T> add_rows;     ///< row i (8 lanes): (i - reach_cells_)^2, what passes 2 and 3 add
-    std::vector<const T*> span;  ///< passes 2, 3: the blocks within reach along the pass's axis (null outside)
-    std::vector<const T*> rows;  ///< passes 2, 3: the span's rows (pass 2) or layers (pass 3), cell by cell
+    std::vector<T> x;                 ///< pass 1: squared distance along x
+    std::vector<T> xy;                ///< pass 2: in the xy plane
+    std::vector<T> add_rows;          ///< row i (8 lanes): (i - reach_cells_)^2, what passes 2 and 3 add
+    std::vector<const T*> span;       ///< passes 2, 3: the blocks within reach along the pass's axis (null outside)
+    std::vector<uint64_t> span_rows;  ///< passes 2, 3: their row bits (rows_x_, rows_xy_)
+    std::vector<const T*> rows;       ///< passes 2, 3: the span's rows (pass 2) or layers (pass 3), cell by cell
   };
   static constexpr uint32_t kMaxNarrowSq = 16383;
   template <typename T>
@@ -276,11 +277,12 @@ class DistanceField {
   template <typename T>
   void alongZ(const Eigen::Vector3i& local_block, PassValues<T>* values);  // pass 3 into cells_
   /// Points @p span at the blocks of @p values within the reach of block
-  /// @p b along @p axis (null outside the window); false if none of them
-  /// holds a value below saturated_sq_ (@p finite) and the outside holds none.
+  /// @p b along @p axis (null outside the window) and @p span_rows at their
+  /// bits of @p rows (rows_x_ or rows_xy_; 0 outside); false if none of them
+  /// holds a value below saturated_sq_ and the outside holds none.
   template <typename T>
-  bool gatherSpan(const Eigen::Vector3i& b, int axis, const std::vector<T>& values, const std::vector<uint8_t>& finite,
-                  std::vector<const T*>* span) const;
+  bool gatherSpan(const Eigen::Vector3i& b, int axis, const std::vector<T>& values, const std::vector<uint64_t>& rows,
+                  std::vector<const T*>* span, uint64_t* span_rows) const;
   Eigen::Vector3i blockOfLinear(int linear) const;
   int linearOfBlock(const Eigen::Vector3i& b) const {
     return b.x() + size_blocks_.x() * (b.y() + size_blocks_.y() * b.z());
@@ -322,9 +324,10 @@ class DistanceField {
   PassValues<uint32_t> wide_values_;    ///< (scratch)
   std::vector<uint8_t> row_span_;       ///< pass 1: one row's obstacle flags with the reach on both sides (scratch)
   std::vector<const uint8_t*> span_blocks_;  ///< pass 1: the class blocks of that span (scratch)
-  /// Per block: pass 1's / pass 2's values hold one below saturated_sq_ (an
-  /// obstacle within reach), so that passes 2 and 3 skip the blocks far from any.
-  std::vector<uint8_t> finite_x_, finite_xy_;
+  /// Per block, bit 8 z + y: the row (y, z) of pass 1's / pass 2's values
+  /// holds one below saturated_sq_ (an obstacle within reach), so that
+  /// passes 2 and 3 skip the blocks, and the rows, far from any.
+  std::vector<uint64_t> rows_x_, rows_xy_;
   std::vector<uint8_t> region_differed_;  ///< readRegion(): per block, differsFromOutside() before the read (scratch)
   // The blocks of one update (local linear indices) and their marks (mark == epoch_: in the list).
   uint32_t epoch_ = 0;

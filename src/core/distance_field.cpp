@@ -81,8 +81,8 @@ DistanceField::DistanceField(const DistanceFieldConfig& config, double resolutio
     allocatePasses(n, &wide_values_);
   row_span_.assign(static_cast<size_t>(kBlockCells + 2 * reach_blocks_ * kBlockCells), 0);
   span_blocks_.assign(static_cast<size_t>(2 * reach_blocks_ + 1), nullptr);
-  finite_x_.assign(blocks, 0);
-  finite_xy_.assign(blocks, 0);
+  rows_x_.assign(blocks, 0);
+  rows_xy_.assign(blocks, 0);
   for (auto* marks : {&changed_mark_, &mark_x_, &mark_y_, &mark_z_}) marks->assign(blocks, 0);
   for (auto* list : {&changed_, &blocks_x_, &blocks_y_, &blocks_z_}) list->reserve(blocks);
   origin_block_ = -size_blocks_ / 2;
@@ -414,6 +414,7 @@ void DistanceField::allocatePasses(size_t cells, PassValues<T>* values) {
   values->add_rows.clear();
   for (int k = -d; k <= d; ++k) values->add_rows.insert(values->add_rows.end(), kBlockCells, static_cast<T>(k * k));
   values->span.assign(static_cast<size_t>(2 * reach_blocks_ + 1), nullptr);
+  values->span_rows.assign(static_cast<size_t>(2 * reach_blocks_ + 1), 0);
   values->rows.assign(static_cast<size_t>(2 * reach_blocks_ * kBlockCells + kBlockCells), nullptr);
 }
 
@@ -450,7 +451,7 @@ void DistanceField::alongX(const Eigen::Vector3i& b, std::vector<T>* values) {
       words[row] |= obstacleBits(c + row * kBlockCells, uio) << shift;
   }
   const int first = r * kBlockCells;  // the block's first cell in a word
-  bool any = false;                   // an obstacle within reach along x
+  uint64_t finite_rows = 0;           // the rows with an obstacle within reach along x
   for (int row = 0; row < kBlockCells * kBlockCells; ++row) {
     const uint64_t w = words[row];
     T* o = out + row * kBlockCells;
@@ -458,6 +459,7 @@ void DistanceField::alongX(const Eigen::Vector3i& b, std::vector<T>* values) {
       std::fill(o, o + kBlockCells, cap);
       continue;
     }
+    bool any = false;
     for (int x = 0; x < kBlockCells; ++x) {
       const int p = first + x;
       int dist = d + 1;
@@ -468,8 +470,9 @@ void DistanceField::alongX(const Eigen::Vector3i& b, std::vector<T>* values) {
       o[x] = dist <= d ? static_cast<T>(dist * dist) : cap;
       any = any || dist <= d;
     }
+    finite_rows |= uint64_t{any} << row;
   }
-  finite_x_[slotOf(b)] = any ? 1 : 0;
+  rows_x_[slotOf(b)] = finite_rows;
 }
 
 // Pass 1 for reaches beyond kMaxBitReachBlocks: a scan of the row's flags.
@@ -487,7 +490,7 @@ void DistanceField::alongXScalar(const Eigen::Vector3i& b, std::vector<T>* value
   }
   uint8_t* span = row_span_.data();   // obstacle flags of positions [-r * 8, (r + 1) * 8) around the block
   const int first = r * kBlockCells;  // the block's first cell in span
-  bool any = false;                   // an obstacle within reach along x
+  uint64_t finite_rows = 0;           // the rows with an obstacle within reach along x
   for (int row = 0; row < kBlockCells * kBlockCells; ++row) {
     for (int i = 0; i < span_blocks; ++i) {
       uint8_t* s = span + i * kBlockCells;
@@ -510,12 +513,14 @@ void DistanceField::alongXScalar(const Eigen::Vector3i& b, std::vector<T>* value
       if (p < first + kBlockCells) dist[p - first] = std::min(dist[p - first], next - p);
     }
     T* o = out + row * kBlockCells;
+    bool any = false;
     for (int x = 0; x < kBlockCells; ++x) {
       o[x] = dist[x] <= d ? static_cast<T>(dist[x] * dist[x]) : cap;
       any = any || dist[x] <= d;
     }
+    finite_rows |= uint64_t{any} << row;
   }
-  finite_x_[slotOf(b)] = any ? 1 : 0;
+  rows_x_[slotOf(b)] = finite_rows;
 }
 
 namespace {
@@ -569,7 +574,8 @@ inline bool minPlusRows(const uint16_t* const* rows, size_t offset, const uint16
 
 template <typename T>
 bool DistanceField::gatherSpan(const Eigen::Vector3i& b, int axis, const std::vector<T>& values,
-                               const std::vector<uint8_t>& finite, std::vector<const T*>* span) const {
+                               const std::vector<uint64_t>& rows, std::vector<const T*>* span,
+                               uint64_t* span_rows) const {
   const int r = reach_blocks_;
   // Unknown outside is an obstacle: the outside's rows hold 0.
   bool any = config_.unknown_is_occupied && (b[axis] - r < 0 || b[axis] + r >= size_blocks_[axis]);
@@ -578,14 +584,28 @@ bool DistanceField::gatherSpan(const Eigen::Vector3i& b, int axis, const std::ve
     n[axis] += i - r;
     if (n[axis] < 0 || n[axis] >= size_blocks_[axis]) {
       (*span)[static_cast<size_t>(i)] = nullptr;
+      span_rows[i] = 0;
       continue;
     }
     const size_t slot = slotOf(n);
     (*span)[static_cast<size_t>(i)] = &values[slot * kBlockVolume];
-    any = any || finite[slot];
+    span_rows[i] = rows[slot];
+    any = any || rows[slot] != 0;
   }
   return any;
 }
+
+namespace {
+/// The 8 x 8 bit matrix @p x (bit 8 i + j) transposed (bit 8 j + i).
+inline uint64_t transpose8(uint64_t x) {
+  uint64_t t = (x ^ (x >> 7)) & 0x00AA00AA00AA00AAull;
+  x = x ^ t ^ (t << 7);
+  t = (x ^ (x >> 14)) & 0x0000CCCC0000CCCCull;
+  x = x ^ t ^ (t << 14);
+  t = (x ^ (x >> 28)) & 0x00000000F0F0F0F0ull;
+  return x ^ t ^ (t << 28);
+}
+}  // namespace
 
 // Pass 2: g(x, y) = min over |k| <= reach of pass 1's g(x, y + k) + k^2,
 // each row of 8 cells at once.
@@ -595,26 +615,51 @@ void DistanceField::alongY(const Eigen::Vector3i& b, PassValues<T>* values) {
   const T cap = static_cast<T>(saturated_sq_);
   const size_t slot = slotOf(b);
   T* out = &values->xy[slot * kBlockVolume];
-  if (!gatherSpan(b, 1, values->x, finite_x_, &values->span)) {  // no obstacle within reach: nothing to do
+  uint64_t* span_rows = values->span_rows.data();
+  if (!gatherSpan(b, 1, values->x, rows_x_, &values->span, span_rows)) {  // no obstacle within reach: nothing to do
     std::fill(out, out + kBlockVolume, cap);
-    finite_xy_[slot] = 0;
+    rows_xy_[slot] = 0;
     return;
   }
+  const bool uio = config_.unknown_is_occupied;
   T outside_row[kBlockCells];
-  std::fill(outside_row, outside_row + kBlockCells, config_.unknown_is_occupied ? T{0} : cap);
+  std::fill(outside_row, outside_row + kBlockCells, uio ? T{0} : cap);
+  // The span's rows of a layer fit one word up to kMaxBitReachBlocks: then
+  // rows with nothing within reach of a row are skipped.
+  const bool by_row = reach_blocks_ <= kMaxBitReachBlocks;
+  const uint64_t reach_bits = (uint64_t{2} << (2 * d)) - 1;
   const T** rows = values->rows.data();  // the span's rows at this z, by their y in the span
-  bool any = false;
+  uint64_t finite_rows = 0;
   for (int z = 0; z < kBlockCells; ++z) {
+    T* layer = out + (z << (2 * kBlockShift));
+    uint64_t live = ~uint64_t{0};  // bit yy: the span's row yy may hold a value below cap
+    if (by_row) {
+      live = 0;
+      for (int i = 0; i <= 2 * reach_blocks_; ++i) {
+        const uint64_t bits =
+            values->span[static_cast<size_t>(i)] ? (span_rows[i] >> (z * kBlockCells)) & 0xff : (uio ? 0xff : 0);
+        live |= bits << (i * kBlockCells);
+      }
+      if (live == 0) {
+        std::fill(layer, layer + kBlockCells * kBlockCells, cap);
+        continue;
+      }
+    }
     for (int yy = first - d; yy < first + kBlockCells + d; ++yy) {
       const T* block = values->span[static_cast<size_t>(yy >> kBlockShift)];
       rows[yy] = block ? block + ((z << (2 * kBlockShift)) | ((yy & (kBlockCells - 1)) << kBlockShift)) : outside_row;
     }
     for (int y = 0; y < kBlockCells; ++y) {
-      T* o = out + ((z << (2 * kBlockShift)) | (y << kBlockShift));
-      any = minPlusRows(rows + first + y - d, 0, values->add_rows.data(), 2 * d + 1, cap, o) || any;
+      T* o = layer + (y << kBlockShift);
+      if (((live >> (first + y - d)) & reach_bits) == 0) {
+        std::fill(o, o + kBlockCells, cap);
+        continue;
+      }
+      const bool any = minPlusRows(rows + first + y - d, 0, values->add_rows.data(), 2 * d + 1, cap, o);
+      finite_rows |= uint64_t{any} << (z * kBlockCells + y);
     }
   }
-  finite_xy_[slot] = any ? 1 : 0;
+  rows_xy_[slot] = finite_rows;
 }
 
 // Pass 3: along z from pass 2, 8 cells (a row) at a time as pass 2, capped
@@ -626,24 +671,44 @@ void DistanceField::alongZ(const Eigen::Vector3i& b, PassValues<T>* values) {
   const size_t slot = slotOf(b);
   uint32_t* out = &cells_[slot * kBlockVolume];
   const uint8_t* classes = &classes_[slot * kBlockVolume];
-  if (!gatherSpan(b, 2, values->xy, finite_xy_, &values->span)) {
+  uint64_t* span_rows = values->span_rows.data();
+  if (!gatherSpan(b, 2, values->xy, rows_xy_, &values->span, span_rows)) {
     for (int i = 0; i < kBlockVolume; ++i) out[i] = saturated_sq_ | (uint32_t{classes[i]} << kClassShift);
     return;
   }
+  const bool uio = config_.unknown_is_occupied;
   constexpr int kLayer = kBlockCells * kBlockCells;
   T outside_layer[kLayer];
-  std::fill(outside_layer, outside_layer + kLayer, config_.unknown_is_occupied ? T{0} : cap);
+  std::fill(outside_layer, outside_layer + kLayer, uio ? T{0} : cap);
   const T** layers = values->rows.data();  // the span's layers, by their z in the span
   for (int zz = first - d; zz < first + kBlockCells + d; ++zz) {
     const T* block = values->span[static_cast<size_t>(zz >> kBlockShift)];
     layers[zz] = block ? block + ((zz & (kBlockCells - 1)) << (2 * kBlockShift)) : outside_layer;
   }
+  // Per row y, bit zz: the span's layer zz holds a value below cap in that
+  // row (pass 2's row bits transposed: bit 8 z + y to bit 8 y + z); all set
+  // when the span does not fit a word.
+  uint64_t live[kBlockCells];
+  std::fill(live, live + kBlockCells, ~uint64_t{0});
+  if (reach_blocks_ <= kMaxBitReachBlocks) {
+    std::fill(live, live + kBlockCells, 0);
+    for (int i = 0; i <= 2 * reach_blocks_; ++i) {
+      const uint64_t by_y = values->span[static_cast<size_t>(i)] ? transpose8(span_rows[i]) : (uio ? ~uint64_t{0} : 0);
+      for (int y = 0; y < kBlockCells; ++y) live[y] |= ((by_y >> (y * kBlockCells)) & 0xff) << (i * kBlockCells);
+    }
+  }
+  const uint64_t reach_bits = (uint64_t{2} << (2 * d)) - 1;
   for (int z = 0; z < kBlockCells; ++z)
-    for (int row = 0; row < kLayer; row += kBlockCells) {
-      T acc[kBlockCells];
-      minPlusRows(layers + first + z - d, static_cast<size_t>(row), values->add_rows.data(), 2 * d + 1, cap, acc);
+    for (int y = 0; y < kBlockCells; ++y) {
+      const int row = y * kBlockCells;
       uint32_t* o = out + z * kLayer + row;
       const uint8_t* c = classes + z * kLayer + row;
+      if (((live[y] >> (first + z - d)) & reach_bits) == 0) {  // nothing within reach along z
+        for (int x = 0; x < kBlockCells; ++x) o[x] = saturated_sq_ | (uint32_t{c[x]} << kClassShift);
+        continue;
+      }
+      T acc[kBlockCells];
+      minPlusRows(layers + first + z - d, static_cast<size_t>(row), values->add_rows.data(), 2 * d + 1, cap, acc);
       for (int x = 0; x < kBlockCells; ++x) o[x] = acc[x] | (uint32_t{c[x]} << kClassShift);
     }
 }
