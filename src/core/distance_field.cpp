@@ -627,7 +627,7 @@ void DistanceField::alongY(const Eigen::Vector3i& b, PassValues<T>* values) {
   // The span's rows of a layer fit one word up to kMaxBitReachBlocks: then
   // rows with nothing within reach of a row are skipped.
   const bool by_row = reach_blocks_ <= kMaxBitReachBlocks;
-  const uint64_t reach_bits = (uint64_t{2} << (2 * d)) - 1;
+  const uint64_t reach_bits = by_row ? (uint64_t{2} << (2 * d)) - 1 : 0;  // 2d + 1 rows, fewer than 64 by_row
   const T** rows = values->rows.data();  // the span's rows at this z, by their y in the span
   uint64_t finite_rows = 0;
   for (int z = 0; z < kBlockCells; ++z) {
@@ -651,7 +651,7 @@ void DistanceField::alongY(const Eigen::Vector3i& b, PassValues<T>* values) {
     }
     for (int y = 0; y < kBlockCells; ++y) {
       T* o = layer + (y << kBlockShift);
-      if (((live >> (first + y - d)) & reach_bits) == 0) {
+      if (by_row && ((live >> (first + y - d)) & reach_bits) == 0) {
         std::fill(o, o + kBlockCells, cap);
         continue;
       }
@@ -690,20 +690,21 @@ void DistanceField::alongZ(const Eigen::Vector3i& b, PassValues<T>* values) {
   // when the span does not fit a word.
   uint64_t live[kBlockCells];
   std::fill(live, live + kBlockCells, ~uint64_t{0});
-  if (reach_blocks_ <= kMaxBitReachBlocks) {
+  const bool by_row = reach_blocks_ <= kMaxBitReachBlocks;
+  if (by_row) {
     std::fill(live, live + kBlockCells, 0);
     for (int i = 0; i <= 2 * reach_blocks_; ++i) {
       const uint64_t by_y = values->span[static_cast<size_t>(i)] ? transpose8(span_rows[i]) : (uio ? ~uint64_t{0} : 0);
       for (int y = 0; y < kBlockCells; ++y) live[y] |= ((by_y >> (y * kBlockCells)) & 0xff) << (i * kBlockCells);
     }
   }
-  const uint64_t reach_bits = (uint64_t{2} << (2 * d)) - 1;
+  const uint64_t reach_bits = by_row ? (uint64_t{2} << (2 * d)) - 1 : 0;  // 2d + 1 layers, fewer than 64 by_row
   for (int z = 0; z < kBlockCells; ++z)
     for (int y = 0; y < kBlockCells; ++y) {
       const int row = y * kBlockCells;
       uint32_t* o = out + z * kLayer + row;
       const uint8_t* c = classes + z * kLayer + row;
-      if (((live[y] >> (first + z - d)) & reach_bits) == 0) {  // nothing within reach along z
+      if (by_row && ((live[y] >> (first + z - d)) & reach_bits) == 0) {  // nothing within reach along z
         for (int x = 0; x < kBlockCells; ++x) o[x] = saturated_sq_ | (uint32_t{c[x]} << kClassShift);
         continue;
       }
