@@ -420,8 +420,9 @@ void MapAccumulator::fuseInParts(const GridUpdateView& update) {
 }
 
 size_t MapAccumulator::prune() {
+  // The leaves are copied as they are: the inner nodes may stay stale (the
+  // kept tree computes its own), so a prune that keeps everything costs nothing.
   if (config_.max_extent_m <= 0.0 || W_recent_origins_.empty()) return 0;
-  tree();  // inner nodes up to date before the leaves are copied
   Eigen::AlignedBox3d recent;
   for (const auto& p : W_recent_origins_) recent.extend(p);
   const Eigen::Array3d lo = recent.min().array() - config_.max_extent_m;
