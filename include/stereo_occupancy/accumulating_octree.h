@@ -84,7 +84,16 @@ class AccumulatingOcTree : public octomap::OcTree {
     /// add()'s walk from the node at @p depth on the previous key's path
     /// (a common ancestor of the two keys); @p created: that node is new.
     void descend(const octomap::OcTreeKey& key, float log_odds, int depth, bool created);
-    /// descend()'s log-odds update of the leaf @p node of @p key, recording its class change.
+    /// @p node takes no update of @p log_odds: it is clamped that way
+    /// already (updateNode's early return).
+    bool clamped(const octomap::OcTreeNode* node, float log_odds) const {
+      return (log_odds >= 0.0f && node->getLogOdds() >= tree_->clamping_thres_max) ||
+             (log_odds <= 0.0f && node->getLogOdds() <= tree_->clamping_thres_min);
+    }
+    /// The log-odds update of @p leaf (of @p key; @p created: new), unless it
+    /// is clamped already, recording its class change.
+    void updateLeaf(const octomap::OcTreeKey& key, octomap::OcTreeNode* leaf, float log_odds, bool created);
+    /// updateLeaf()'s update when recording.
     void updateRecording(const octomap::OcTreeKey& key, octomap::OcTreeNode* node, float log_odds, bool created);
 
     AccumulatingOcTree* tree_;
@@ -180,19 +189,14 @@ inline void AccumulatingOcTree::LeafUpdater::descend(const octomap::OcTreeKey& k
                                                      bool created) {
   AccumulatingOcTree& t = *tree_;
   const int leaf_depth = static_cast<int>(t.tree_depth);
-  // A clamped node takes no update (updateNode's early return). search()
-  // would return the deepest existing node on the path if it has no
-  // children (a leaf, possibly pruned), nothing if a child is missing.
-  auto saturated = [&](const octomap::OcTreeNode* node) {
-    return (log_odds >= 0.0f && node->getLogOdds() >= t.clamping_thres_max) ||
-           (log_odds <= 0.0f && node->getLogOdds() <= t.clamping_thres_min);
-  };
   octomap::OcTreeNode* node = path_[depth];
   for (; depth < leaf_depth; ++depth) {
     const unsigned pos = octomap::computeChildIdx(key, leaf_depth - 1 - depth);
     if (!t.nodeChildExists(node, pos)) {
       if (!t.nodeHasChildren(node) && !created) {  // a pruned leaf
-        if (saturated(node)) {
+        // A clamped one takes no update: updateNode's search() returns the
+        // deepest existing node on the path if it has no children.
+        if (clamped(node, log_odds)) {
           known_depth_ = depth;
           return;
         }
@@ -206,12 +210,17 @@ inline void AccumulatingOcTree::LeafUpdater::descend(const octomap::OcTreeKey& k
     path_[depth + 1] = node;
   }
   known_depth_ = leaf_depth;
-  if (!created && saturated(node)) return;
+  updateLeaf(key, node, log_odds, created);
+}
+
+inline void AccumulatingOcTree::LeafUpdater::updateLeaf(const octomap::OcTreeKey& key, octomap::OcTreeNode* leaf,
+                                                        float log_odds, bool created) {
+  if (!created && clamped(leaf, log_odds)) return;
   if (changes_) {  // the only cost of recording when it is off
-    updateRecording(key, node, log_odds, created);
+    updateRecording(key, leaf, log_odds, created);
     return;
   }
-  t.updateNodeLogOdds(node, log_odds);
+  tree_->updateNodeLogOdds(leaf, log_odds);
 }
 
 inline void AccumulatingOcTree::LeafUpdater::updateRecording(const octomap::OcTreeKey& key, octomap::OcTreeNode* node,
@@ -230,21 +239,38 @@ inline void AccumulatingOcTree::LeafUpdater::updateRecording(const octomap::OcTr
 }
 
 inline void AccumulatingOcTree::LeafUpdater::addSiblings(const octomap::OcTreeKey& first, const float (&values)[8]) {
-  bool added = false;
-  for (int i = 0; i < 8; ++i) {
-    if (!(values[i] == values[i])) continue;
-    const octomap::OcTreeKey key(static_cast<octomap::key_type>(first[0] + (i & 1)),
-                                 static_cast<octomap::key_type>(first[1] + ((i >> 1) & 1)),
-                                 static_cast<octomap::key_type>(first[2] + (i >> 2)));
-    if (!added) {
-      add(key, values[i]);
-      added = true;
-      continue;
+  auto keyOf = [&first](int i) {
+    return octomap::OcTreeKey(static_cast<octomap::key_type>(first[0] + (i & 1)),
+                              static_cast<octomap::key_type>(first[1] + ((i >> 1) & 1)),
+                              static_cast<octomap::key_type>(first[2] + (i >> 2)));
+  };
+  int i = 0;
+  while (i < 8 && !(values[i] == values[i])) ++i;
+  if (i == 8) return;
+  add(keyOf(i), values[i]);
+  const int leaf_depth = static_cast<int>(tree_->tree_depth);
+  if (known_depth_ < leaf_depth) {
+    // The walk stopped at a clamped pruned leaf above: each sibling's walk
+    // stops there too (their deepest common ancestor is the parent).
+    for (++i; i < 8; ++i) {
+      if (!(values[i] == values[i])) continue;
+      previous_ = keyOf(i);
+      descend(previous_, values[i], std::min(leaf_depth - 1, known_depth_), false);
     }
-    // A sibling of the previous key: their deepest common ancestor is the
-    // parent (what add() finds), or the node the previous walk stopped at.
-    previous_ = key;
-    descend(key, values[i], std::min(static_cast<int>(tree_->tree_depth) - 1, known_depth_), false);
+    return;
+  }
+  // The siblings are the children of the first leaf's parent, child i for
+  // values[i] (first's components are even): no walk, the parent is known.
+  AccumulatingOcTree& t = *tree_;
+  octomap::OcTreeNode* parent = path_[static_cast<size_t>(leaf_depth - 1)];
+  for (++i; i < 8; ++i) {
+    if (!(values[i] == values[i])) continue;
+    const bool exists = t.nodeChildExists(parent, static_cast<unsigned>(i));
+    octomap::OcTreeNode* leaf =
+        exists ? t.getNodeChild(parent, static_cast<unsigned>(i)) : t.createNodeChild(parent, static_cast<unsigned>(i));
+    previous_ = keyOf(i);
+    path_[static_cast<size_t>(leaf_depth)] = leaf;
+    updateLeaf(previous_, leaf, values[i], !exists);
   }
 }
 
