@@ -142,6 +142,22 @@ class DistanceField {
   /// a NaN point, in_window is false and the point is unknown.
   DistanceSample sample(const Eigen::Vector3d& W_point) const;
 
+  /// sample() at each of the @p count points @p W_points (metres, map
+  /// frame) into @p out[0, count), the same answers bit for bit. For many
+  /// points scattered over the window: the cache line of the cell
+  /// kPrefetchPoints points ahead is requested while the present point is
+  /// answered, so that the misses overlap instead of following one another.
+  /// @p W_points and @p out may be null when @p count is 0.
+  void sample(const Eigen::Vector3d* W_points, size_t count, DistanceSample* out) const;
+  /// The same for a vector; @p out is resized to W_points.size().
+  void sample(const std::vector<Eigen::Vector3d>& W_points, std::vector<DistanceSample>* out) const;
+
+  /// How many points ahead the batch sample() requests the point's cell:
+  /// a point takes about 45 ns when its cells are cached, so 8 ahead cover a
+  /// miss to memory of up to 350 ns; 16 were slower (more lines in flight
+  /// than the core tracks), 4 no faster.
+  static constexpr size_t kPrefetchPoints = 8;
+
   /// Checks the straight segments between @p W_waypoints for a body of
   /// radius @p radius_m: each cell the segments pass through must be known
   /// and at least radius_m from the nearest obstacle (cell centres), and not
@@ -217,6 +233,20 @@ class DistanceField {
     const uint32_t sq = sqOf(word);
     return sq >= saturated_sq_ ? static_cast<float>(config_.max_distance_m)
                                : std::sqrt(static_cast<float>(sq)) * static_cast<float>(resolution_m_);
+  }
+  /// sample()'s answer at the local cell @p l (inside the window) whose word is cells_[@p index].
+  DistanceSample sampleCell(const Eigen::Vector3i& l, size_t index) const;
+  /// Index in cells_ of the neighbour @p step (-1 or +1) along @p axis of the
+  /// local cell @p l at @p index; the neighbour must be inside the window.
+  size_t neighbourIndex(const Eigen::Vector3i& l, size_t index, int axis, int step) const {
+    const int in_block = l[axis] & (kBlockCells - 1);
+    if (in_block + step >= 0 && in_block + step < kBlockCells) {  // same block: a stride away
+      const size_t stride = size_t{1} << (axis * kBlockShift);
+      return step > 0 ? index + stride : index - stride;
+    }
+    Eigen::Vector3i n = l;  // across a block face: the other block's slot
+    n[axis] += step;
+    return cellIndex(n);
   }
   /// The local cell of @p W_point, or false outside the window (or NaN).
   bool localCell(const Eigen::Vector3d& W_point, Eigen::Vector3i* l) const;

@@ -32,6 +32,23 @@ void mark(int linear, uint32_t epoch, std::vector<uint32_t>* marks, std::vector<
   list->push_back(linear);
 }
 
+/// sample()'s answer outside the window (or at a NaN point).
+DistanceSample outsideSample() {
+  DistanceSample s;
+  s.distance_m = std::numeric_limits<float>::quiet_NaN();
+  return s;
+}
+
+/// Asks the cache for the line at @p address ahead of its read (a hint: no
+/// fault, no effect on the answers); nothing where the compiler has no such builtin.
+inline void prefetchRead(const void* address) {
+#if defined(__GNUC__)
+  __builtin_prefetch(address, /*rw=*/0, /*locality=*/3);
+#else
+  (void)address;
+#endif
+}
+
 }  // namespace
 
 DistanceField::DistanceField(const DistanceFieldConfig& config, double resolution_m)
@@ -717,36 +734,62 @@ void DistanceField::alongZ(const Eigen::Vector3i& b, PassValues<T>* values) {
 // --- queries ------------------------------------------------------------------
 
 DistanceSample DistanceField::sample(const Eigen::Vector3d& W_point) const {
-  DistanceSample s;
   Eigen::Vector3i l;
-  if (!localCell(W_point, &l)) {
-    s.distance_m = std::numeric_limits<float>::quiet_NaN();
-    return s;
+  if (!localCell(W_point, &l)) return outsideSample();
+  return sampleCell(l, cellIndex(l));
+}
+
+void DistanceField::sample(const Eigen::Vector3d* W_points, size_t count, DistanceSample* out) const {
+  // A ring of the points ahead whose lines are requested: slot i mod
+  // kPrefetchPoints holds point i's local cell until point i is answered.
+  struct Ahead {
+    Eigen::Vector3i l;
+    size_t index;
+    bool inside;
+  };
+  Ahead ahead[kPrefetchPoints];
+  auto request = [&](size_t i) {
+    Ahead& a = ahead[i % kPrefetchPoints];
+    a.inside = localCell(W_points[i], &a.l);
+    if (!a.inside) return;
+    a.index = cellIndex(a.l);
+    // The cell's line only: its neighbours along x and y mostly share it or
+    // the next, and those along z are loaded side by side once its word has
+    // arrived. Their indices here would cost branches that mispredict (a
+    // random point's cell lies on a block's face along some axis often);
+    // prefetching all seven lines was no faster than sample() one at a time.
+    prefetchRead(&cells_[a.index]);
+  };
+  for (size_t i = 0; i < std::min(count, kPrefetchPoints); ++i) request(i);
+  for (size_t i = 0; i < count; ++i) {
+    const Ahead a = ahead[i % kPrefetchPoints];  // its slot takes point i + kPrefetchPoints next
+    if (i + kPrefetchPoints < count) request(i + kPrefetchPoints);
+    out[i] = a.inside ? sampleCell(a.l, a.index) : outsideSample();
   }
+}
+
+void DistanceField::sample(const std::vector<Eigen::Vector3d>& W_points, std::vector<DistanceSample>* out) const {
+  out->resize(W_points.size());
+  sample(W_points.data(), W_points.size(), out->data());
+}
+
+DistanceSample DistanceField::sampleCell(const Eigen::Vector3i& l, size_t index) const {
+  DistanceSample s;
   s.in_window = true;
-  const size_t index = cellIndex(l);
   const uint32_t word = cells_[index];  // one load: the class and the distance
   s.cell_class = static_cast<CellClass>(classOf(word));
   s.distance_m = distanceOf(word);
   if (sqOf(word) >= saturated_sq_) return s;  // flat: no gradient
   const float res = static_cast<float>(resolution_m_);
-  for (int a = 0; a < 3; ++a) {
-    // Central differences; one-sided at the window's edges. A neighbour in
-    // the same block is a stride away; across a block face its own index.
-    const int in_block = l[a] & (kBlockCells - 1);
-    const size_t stride = size_t{1} << (a * kBlockShift);
+  for (int a = 0; a < 3; ++a) {  // central differences; one-sided at the window's edges
     float lo = s.distance_m, hi = s.distance_m;
     float cells = 0.0f;
     if (l[a] > 0) {
-      Eigen::Vector3i n = l;
-      --n[a];
-      lo = distanceOf(cells_[in_block > 0 ? index - stride : cellIndex(n)]);
+      lo = distanceOf(cells_[neighbourIndex(l, index, a, -1)]);
       cells += 1.0f;
     }
     if (l[a] + 1 < size_cells_[a]) {
-      Eigen::Vector3i n = l;
-      ++n[a];
-      hi = distanceOf(cells_[in_block < kBlockCells - 1 ? index + stride : cellIndex(n)]);
+      hi = distanceOf(cells_[neighbourIndex(l, index, a, +1)]);
       cells += 1.0f;
     }
     if (cells > 0.0f) s.gradient[a] = (hi - lo) / (cells * res);

@@ -2,6 +2,8 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
 #include <random>
 #include <sstream>
@@ -422,6 +424,120 @@ TEST(DistanceField, SampleNearOneObstacle) {
     EXPECT_TRUE(std::isnan(s.distance_m));
     EXPECT_EQ(s.gradient, Eigen::Vector3f::Zero());
   }
+}
+
+namespace {
+
+uint32_t bitsOf(float v) {
+  uint32_t b;
+  std::memcpy(&b, &v, sizeof b);
+  return b;
+}
+
+/// @p batch is @p single bit for bit (a NaN distance the same NaN).
+::testing::AssertionResult sameBits(const DistanceSample& batch, const DistanceSample& single) {
+  bool same = batch.in_window == single.in_window && batch.cell_class == single.cell_class &&
+              bitsOf(batch.distance_m) == bitsOf(single.distance_m);
+  for (int a = 0; a < 3; ++a) same = same && bitsOf(batch.gradient[a]) == bitsOf(single.gradient[a]);
+  if (same) return ::testing::AssertionSuccess();
+  return ::testing::AssertionFailure() << "batch: in_window " << batch.in_window << " class " << int(batch.cell_class)
+                                       << " distance " << batch.distance_m << " gradient " << batch.gradient.transpose()
+                                       << "; sample(): in_window " << single.in_window << " class "
+                                       << int(single.cell_class) << " distance " << single.distance_m << " gradient "
+                                       << single.gradient.transpose();
+}
+
+}  // namespace
+
+// The batch sample() answers what sample() answers, bit for bit, for each
+// point of a random map's window and beyond: random points, cell centres
+// and faces next to the window's faces, the faces themselves, NaN, infinite
+// and huge points; in batches shorter and longer than the prefetch distance
+// (whose ring of points ahead must hand each answer to its own point), and
+// an empty one.
+TEST(DistanceField, BatchSampleEqualsSample) {
+  for (bool uio : {false, true}) {
+    FieldScene scene(smallWindow(uio, 1.0));
+    std::mt19937 rng(4747);
+    const Eigen::Vector3d W_vehicle(0.1, 0.1, 0.1);
+    Eigen::Vector3i first, size;
+    windowAndMargin(W_vehicle, &first, &size);
+    ASSERT_TRUE(scene.integrate(randomUpdate(&rng, first, size, 0.3, 0.01), W_vehicle));
+    const DistanceField& f = scene.field;
+    const Eigen::AlignedBox3d box = f.window();
+    const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+
+    std::vector<Eigen::Vector3d> points;
+    std::uniform_real_distribution<double> u(-0.2, 1.2);  // beyond each face too
+    auto random = [&] {
+      return Eigen::Vector3d(box.min() + (box.max() - box.min()).cwiseProduct(Eigen::Vector3d(u(rng), u(rng), u(rng))));
+    };
+    for (int k = 0; k < 3000; ++k) points.push_back(random());
+    // The window's faces (the upper ones outside), the cells next to them, a cell's faces.
+    for (int a = 0; a < 3; ++a)
+      for (double along : {box.min()[a], box.min()[a] + 0.5 * kRes, box.max()[a] - 0.5 * kRes, box.max()[a],
+                           box.max()[a] - 1e-9, box.min()[a] - 1e-9, std::round(box.center()[a] / kRes) * kRes}) {
+        for (int k = 0; k < 20; ++k) {
+          Eigen::Vector3d p = random().cwiseMax(box.min()).cwiseMin(box.max() - Eigen::Vector3d::Constant(1e-6));
+          p[a] = along;
+          points.push_back(p);
+        }
+      }
+    points.push_back(box.min());
+    points.push_back(box.max() - Eigen::Vector3d::Constant(0.5 * kRes));
+    // Not finite or far: one coordinate or all.
+    for (double bad : {nan, inf, -inf, 1e300, -1e300})
+      for (int a = 0; a < 3; ++a) {
+        Eigen::Vector3d p = box.center();
+        p[a] = bad;
+        points.push_back(p);
+      }
+    points.push_back(Eigen::Vector3d::Constant(nan));
+    std::shuffle(points.begin(), points.end(), rng);
+
+    std::vector<DistanceSample> single;
+    size_t outside = 0, with_gradient = 0, occupied = 0;
+    for (const Eigen::Vector3d& p : points) {
+      single.push_back(f.sample(p));
+      outside += !single.back().in_window;
+      with_gradient += single.back().gradient != Eigen::Vector3f::Zero();
+      occupied += single.back().cell_class == CellClass::kOccupied;
+    }
+    // The set reaches every kind of answer.
+    EXPECT_GT(outside, 200u);
+    EXPECT_GT(with_gradient, 500u);
+    EXPECT_GT(occupied, 5u);
+
+    std::vector<DistanceSample> batch = {DistanceSample(), DistanceSample()};  // resized to the points
+    f.sample(points, &batch);
+    ASSERT_EQ(batch.size(), points.size());
+    size_t wrong = 0;
+    for (size_t i = 0; i < points.size(); ++i) {
+      const ::testing::AssertionResult same = sameBits(batch[i], single[i]);
+      if (!same && wrong++ < 5)
+        ADD_FAILURE() << "uio " << uio << " point " << i << " " << points[i].transpose() << ": " << same.message();
+    }
+    EXPECT_EQ(wrong, 0u) << "uio " << uio;
+
+    // Short batches (below, at and just above the prefetch distance) at each offset of the points.
+    for (size_t count : {size_t{1}, size_t{2}, DistanceField::kPrefetchPoints - 1, DistanceField::kPrefetchPoints,
+                         DistanceField::kPrefetchPoints + 1, 2 * DistanceField::kPrefetchPoints + 3}) {
+      std::vector<DistanceSample> out(count + 1);
+      const DistanceSample sentinel = out.back();
+      for (size_t offset = 0; offset + count <= points.size(); offset += 97) {
+        f.sample(points.data() + offset, count, out.data());
+        for (size_t i = 0; i < count; ++i)
+          ASSERT_TRUE(sameBits(out[i], single[offset + i])) << "count " << count << " offset " << offset << " i " << i;
+        ASSERT_TRUE(sameBits(out[count], sentinel)) << "count " << count << ": wrote past the end";
+      }
+    }
+  }
+  // An empty batch: nothing read, nothing written.
+  OneObstacle o(smallWindow(false, 1.0));
+  o.scene.field.sample(nullptr, 0, nullptr);
+  std::vector<DistanceSample> out(3);
+  o.scene.field.sample(std::vector<Eigen::Vector3d>(), &out);
+  EXPECT_TRUE(out.empty());
 }
 
 // Path checks: clear with the smallest clearance along it, blocked at the
