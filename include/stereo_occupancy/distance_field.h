@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <new>  // bad_alloc
 #include <string>
 #include <vector>
 
@@ -89,6 +90,44 @@ struct RayCastResult {
   Eigen::Vector3d W_point = Eigen::Vector3d::Zero();  ///< centre of the occupied / first unknown cell [m]
   double range_m = 0.0;                               ///< distance along the ray to where it entered that cell [m]
 };
+
+namespace detail {
+
+/// On Linux, arrays of at least this size are 2 MiB-aligned and advised to
+/// be backed by transparent huge pages (madvise); elsewhere, and smaller
+/// arrays, come from operator new [bytes].
+constexpr size_t kHugePageBytes = size_t{2} << 20;
+/// @p bytes of memory, huge pages where the OS gives them (see kHugePageBytes).
+/// @throws std::bad_alloc
+void* allocateHugePages(size_t bytes);
+/// Frees what allocateHugePages(@p bytes) returned.
+void freeHugePages(void* p, size_t bytes);
+
+/// A std allocator on allocateHugePages(): the field's cells, read at random
+/// places of the window by the queries, then take one TLB entry per 2 MiB
+/// instead of per 4 KiB page.
+template <typename T>
+struct HugePageAllocator {
+  using value_type = T;
+  HugePageAllocator() = default;
+  template <typename U>
+  HugePageAllocator(const HugePageAllocator<U>& /*other*/) {}
+  T* allocate(size_t n) {
+    if (n > static_cast<size_t>(-1) / sizeof(T)) throw std::bad_alloc();
+    return static_cast<T*>(allocateHugePages(n * sizeof(T)));
+  }
+  void deallocate(T* p, size_t n) { freeHugePages(p, n * sizeof(T)); }
+};
+template <typename T, typename U>
+bool operator==(const HugePageAllocator<T>& /*a*/, const HugePageAllocator<U>& /*b*/) {
+  return true;
+}
+template <typename T, typename U>
+bool operator!=(const HugePageAllocator<T>& /*a*/, const HugePageAllocator<U>& /*b*/) {
+  return false;
+}
+
+}  // namespace detail
 
 /// The field. Not thread-safe: callers serialise updates and queries
 /// (ros/distance_field_server.h shares one between the accumulator and
@@ -348,7 +387,8 @@ class DistanceField {
   /// Per cell, what the queries read in one load: the squared distance to
   /// the nearest obstacle, capped at saturated_sq_ [cells^2] (sqOf()), and
   /// the class, as in classes_ (classOf()).
-  std::vector<uint32_t> cells_;
+  /// Huge pages where the OS gives them (detail::HugePageAllocator).
+  std::vector<uint32_t, detail::HugePageAllocator<uint32_t>> cells_;
   bool narrow_ = false;                 ///< saturated_sq_ <= kMaxNarrowSq: the passes run in narrow_values_
   PassValues<uint16_t> narrow_values_;  ///< (scratch)
   PassValues<uint32_t> wide_values_;    ///< (scratch)

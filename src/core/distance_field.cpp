@@ -1,6 +1,7 @@
 #include "stereo_occupancy/distance_field.h"
 
 #include <algorithm>
+#include <cstdlib>  // aligned_alloc, free
 #include <cstring>
 #include <limits>
 #include <stdexcept>
@@ -8,6 +9,9 @@
 
 #ifdef __SSE2__
 #include <emmintrin.h>
+#endif
+#ifdef __linux__
+#include <sys/mman.h>  // madvise
 #endif
 
 #include "stereo_occupancy/accumulating_octree.h"  // leafOverlaps
@@ -50,6 +54,39 @@ inline void prefetchRead(const void* address) {
 }
 
 }  // namespace
+
+namespace detail {
+
+void* allocateHugePages(size_t bytes) {
+#ifdef __linux__
+  if (bytes >= kHugePageBytes) {
+    if (bytes > std::numeric_limits<size_t>::max() - kHugePageBytes) throw std::bad_alloc();
+    // Whole huge pages, aligned to them: a transparent huge page backs an aligned 2 MiB only.
+    const size_t rounded = (bytes + kHugePageBytes - 1) / kHugePageBytes * kHugePageBytes;
+    void* p = std::aligned_alloc(kHugePageBytes, rounded);
+    if (p == nullptr) throw std::bad_alloc();
+#ifdef MADV_HUGEPAGE
+    // Before the first touch, so that the faults take huge pages. Refused
+    // (no THP, an old kernel): small pages, the same answers.
+    (void)madvise(p, rounded, MADV_HUGEPAGE);
+#endif
+    return p;
+  }
+#endif
+  return ::operator new(bytes);
+}
+
+void freeHugePages(void* p, size_t bytes) {
+#ifdef __linux__
+  if (bytes >= kHugePageBytes) {
+    std::free(p);
+    return;
+  }
+#endif
+  ::operator delete(p);
+}
+
+}  // namespace detail
 
 DistanceField::DistanceField(const DistanceFieldConfig& config, double resolution_m)
     : config_(config), resolution_m_(resolution_m) {
