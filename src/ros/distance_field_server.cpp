@@ -3,6 +3,7 @@
 #include <ros/console.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
 
+#include <algorithm>
 #include <cmath>
 #include <exception>
 #include <limits>
@@ -18,6 +19,10 @@ namespace {
 
 /// At most one warning of a kind in this time [s].
 constexpr double kWarnThrottleS = 5.0;
+/// The distance query answers this many points per batch sample(): many
+/// times its prefetch distance, few enough that the points and answers
+/// (52 KiB) stay in L2.
+constexpr size_t kDistanceBatchPoints = 1024;
 
 Eigen::Vector3d toEigen(const geometry_msgs::Point& p) { return Eigen::Vector3d(p.x, p.y, p.z); }
 Eigen::Vector3d toEigen(const geometry_msgs::Vector3& v) { return Eigen::Vector3d(v.x, v.y, v.z); }
@@ -107,14 +112,23 @@ void answerDistances(const DistanceField& field, const DistanceFieldInfo& info, 
     response->cell_class.resize(n);
     response->distance_m.resize(n);
     response->gradient.resize(n);
-    for (size_t i = 0; i < n; ++i) {
-      const DistanceSample s = field.sample(toEigen(request.points[i]));
-      response->in_window[i] = s.in_window;
-      response->cell_class[i] = static_cast<uint8_t>(s.cell_class);
-      response->distance_m[i] = s.distance_m;
-      response->gradient[i].x = s.gradient.x();
-      response->gradient[i].y = s.gradient.y();
-      response->gradient[i].z = s.gradient.z();
+    std::vector<Eigen::Vector3d> W_points;
+    std::vector<DistanceSample> samples;
+    for (size_t first = 0; first < n; first += kDistanceBatchPoints) {
+      const size_t count = std::min(kDistanceBatchPoints, n - first);
+      W_points.resize(count);
+      for (size_t k = 0; k < count; ++k) W_points[k] = toEigen(request.points[first + k]);
+      field.sample(W_points, &samples);
+      for (size_t k = 0; k < count; ++k) {
+        const DistanceSample& s = samples[k];
+        const size_t i = first + k;
+        response->in_window[i] = s.in_window;
+        response->cell_class[i] = static_cast<uint8_t>(s.cell_class);
+        response->distance_m[i] = s.distance_m;
+        response->gradient[i].x = s.gradient.x();
+        response->gradient[i].y = s.gradient.y();
+        response->gradient[i].z = s.gradient.z();
+      }
     }
   } catch (const std::exception& e) {  // nothing may leave a service callback
     *response = GetDistances::Response();

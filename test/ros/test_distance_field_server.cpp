@@ -76,6 +76,38 @@ TEST_F(DistanceFieldServerTest, DistancesCarryTheFrameAndTheField) {
   EXPECT_TRUE(std::isnan(response.distance_m[2]));
 }
 
+// A request of several of the service's batches: each point's answer is
+// sample()'s at that point, in the request's order (near the wall, in free
+// and unknown space, outside the window).
+TEST_F(DistanceFieldServerTest, DistancesOfManyPointsAreSampleAtEach) {
+  GetDistances::Request request;
+  for (int k = 0; k < 3000; ++k)  // a spiral through the wall's box and out of the window
+    request.points.push_back(
+        point(12.0 * std::sin(0.37 * k) * k / 3000.0, 12.0 * std::cos(0.37 * k) * k / 3000.0, -1.0 + 6.0 * k / 3000.0));
+  GetDistances::Response response;
+  answerDistances(*field_, info_, request, &response);
+  ASSERT_TRUE(response.success) << response.message;
+  ASSERT_EQ(response.distance_m.size(), request.points.size());
+  size_t near_wall = 0, outside = 0;
+  for (size_t i = 0; i < request.points.size(); ++i) {
+    const geometry_msgs::Point& p = request.points[i];
+    const DistanceSample s = field_->sample(Eigen::Vector3d(p.x, p.y, p.z));
+    ASSERT_EQ(bool(response.in_window[i]), s.in_window) << i;
+    ASSERT_EQ(response.cell_class[i], static_cast<uint8_t>(s.cell_class)) << i;
+    if (std::isnan(s.distance_m))
+      ASSERT_TRUE(std::isnan(response.distance_m[i])) << i;
+    else
+      ASSERT_EQ(response.distance_m[i], s.distance_m) << i;
+    ASSERT_EQ(response.gradient[i].x, s.gradient.x()) << i;
+    ASSERT_EQ(response.gradient[i].y, s.gradient.y()) << i;
+    ASSERT_EQ(response.gradient[i].z, s.gradient.z()) << i;
+    near_wall += s.distance_m < 2.0f;
+    outside += !s.in_window;
+  }
+  EXPECT_GT(near_wall, 50u);
+  EXPECT_GT(outside, 50u);
+}
+
 TEST_F(DistanceFieldServerTest, DistancesRefuseNotFinitePointsAndTooLargeRequests) {
   GetDistances::Request request;
   GetDistances::Response response;
