@@ -193,8 +193,7 @@ class DistanceField {
 
   /// How many points ahead the batch sample() requests the point's cell:
   /// a point takes about 45 ns when its cells are cached, so 8 ahead cover a
-  /// miss to memory of up to 350 ns; 16 were slower (more lines in flight
-  /// than the core tracks), 4 no faster.
+  /// miss to memory of up to 350 ns; 16 were slower under load, 4 no faster.
   static constexpr size_t kPrefetchPoints = 8;
 
   /// Checks the straight segments between @p W_waypoints for a body of
