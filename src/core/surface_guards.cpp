@@ -18,6 +18,11 @@ constexpr float kKeepMark = -std::numeric_limits<float>::min();
 /// A value no cell holds: the guard of that value is off.
 constexpr float kNoValue = std::numeric_limits<float>::quiet_NaN();
 
+/// Chunks of slabs per worker and parity in the first pass on a pool: a
+/// frame's hits crowd into a few slabs (the ground, a house front), so one
+/// chunk per worker would leave the others waiting; the pool hands the
+/// chunks out one by one.
+constexpr int kGuardChunksPerWorker = 4;
 /// Cells per part of the second pass on a pool: a part reads 1 MiB, far
 /// more than its hand-out costs.
 constexpr size_t kSettleChunkCells = size_t{1} << 18;
@@ -67,14 +72,14 @@ class GuardPass {
 size_t GuardPass::guardNearOccupied(const Guard& guard, WorkerPool* pool, const uint8_t* occupied_blocks) {
   const int radius = std::max({guard.sky_radius, guard.gap_radius, guard.edge_radius});
   const unsigned workers = pool ? pool->size() : 1;
-  // Two chunks of slabs per worker, each at least 2·radius + 1 thick: the
-  // even chunks first, then the odd ones, so that no two chunks running at
-  // once reach the same cell (a chunk writes radius slabs beyond its ends).
-  // A cell is marked whoever sees it first: the grid and the count do not
-  // depend on the order.
+  // Chunks of slabs, kGuardChunksPerWorker per worker and parity, each at
+  // least 2·radius + 1 thick: the even chunks first, then the odd ones, so
+  // that no two chunks running at once reach the same cell (a chunk writes
+  // radius slabs beyond its ends). A cell is marked whoever sees it first:
+  // the grid and the count do not depend on the order.
   const int min_slabs = 2 * radius + 1;
-  const int chunk_slabs =
-      std::max(min_slabs, (size_.z() + 2 * static_cast<int>(workers) - 1) / (2 * static_cast<int>(workers)));
+  const int wanted = 2 * kGuardChunksPerWorker * static_cast<int>(workers);
+  const int chunk_slabs = std::max(min_slabs, (size_.z() + wanted - 1) / wanted);
   const int chunks = (size_.z() + chunk_slabs - 1) / chunk_slabs;
   if (workers == 1 || chunks < 2) return guardSlabs(guard, 0, size_.z(), occupied_blocks);
   std::vector<size_t> marked(static_cast<size_t>(chunks), 0);
