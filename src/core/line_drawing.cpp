@@ -343,7 +343,8 @@ STEREO_OCCUPANCY_INLINE uint64_t drawHitAtDepth(const Grid& g, const Eigen::Matr
 /// in double as drawHitAt() computes it (pointComponent()), and one within
 /// a relative margin of the maximum range gets drawHitAtDepth() itself: the
 /// cells are drawHitAtDepth()'s exactly. (A plane on a cell face, as in the
-/// synthetic scenes, puts all its pixels on the double path.)
+/// synthetic scenes, puts all its pixels on the double path: rekeyChunk()
+/// takes such chunks in vector lanes too.)
 class PixelHitRows {
  public:
   /// Pixels keyed per chunk.
@@ -354,6 +355,9 @@ class PixelHitRows {
   static constexpr double kRelativeMargin = 1.0 / (1 << 17);
   /// Beyond this margin the float keys are not worth it: all in double.
   static constexpr float kMaxMarginCells = 0.125f;
+  /// From this many kRekey pixels in a chunk, rekeyChunk() keys them all at
+  /// once; fewer go one by one (a vector pass costs about 8 pixels' worth).
+  static constexpr int kVectorRekeys = 8;
 
   /// What keyChunk() found for one pixel: how to draw its hit.
   enum Draw : int32_t {
@@ -415,6 +419,17 @@ class PixelHitRows {
       min_measured = std::nextafter(min_measured, std::numeric_limits<float>::infinity());
     min_d_ = std::max(valid.min_px, min_measured);
     max_d_ = valid.max_px;
+    // What rekeyChunk() needs, in double as drawHitAtDepth() computes it.
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) R_W_C_[i][j] = R_W_C(i, j);
+      W_origin_[i] = g.W_origin[i];
+      origin_index_[i] = g.origin_index[i];
+    }
+    inv_c_d_ = g.inv_c;
+    cx_d_ = cfg.cx_px;
+    cy_d_ = cfg.cy_px;
+    inv_f_d_ = inv_f;  // as StereoCameraModel's: 1 / f
+    bf_d_ = camera.bf();
   }
 
   /// False: each pixel keyed in double (a huge grid or range, or 2^31 cells).
@@ -431,8 +446,8 @@ class PixelHitRows {
     return any != 0;
   }
 
-  /// Keys pixels [x, x + n) of row y (n <= kChunk).
-  STEREO_OCCUPANCY_AVX2_CLONE void keyChunk(const float* row, int x, int n, int y, Keys* keys) const {
+  /// Keys pixels [x, x + n) of row y (n <= kChunk); returns how many are kRekey.
+  STEREO_OCCUPANCY_AVX2_CLONE int keyChunk(const float* row, int x, int n, int y, Keys* keys) const {
     // Locals, not members, in the loop: it stores through pointers.
     const float inv_f = inv_f_, cx = cx_, bf = bf_, z_cap = z_cap_, r2_in = r2_in_, r2_out = r2_out_;
     const float min_d = min_d_, max_d = max_d_, m = margin_cells_, one_minus_m = 1.0f - margin_cells_;
@@ -443,6 +458,7 @@ class PixelHitRows {
     const float s0 = per_x_[0], s1 = per_x_[1], s2 = per_x_[2];
     const float o0 = origin_[0], o1 = origin_[1], o2 = origin_[2];
     const uint32_t size0 = size_[0], size1 = size_[1], size2 = size_[2], blocks_per_row = blocks_per_row_;
+    int rekeys = 0;
     for (int k = 0; k < n; ++k) {
       const float d = row[x + k];
       const int measured = (d >= min_d) & (d <= max_d);  // 0 for NaN
@@ -473,7 +489,50 @@ class PixelHitRows {
       int32_t draw = kOutside + (kKeyed - kOutside) * inside;
       draw = (draw & ~is_unsure) | (kRekey & is_unsure);
       draw = (draw & ~is_near) | (kExact & is_near);
-      keys->draw[k] = draw & -in_range;
+      draw &= -in_range;
+      keys->draw[k] = draw;
+      rekeys += draw == kRekey;
+    }
+    return rekeys;
+  }
+
+  /// The chunk's kRekey pixels keyed again as drawHitAtDepth() keys them:
+  /// their unsure axes in double (the same operations: rayThroughPixel() ·
+  /// depthFromDisparity(), pointComponent(), floorToInt()), each pixel then
+  /// kKeyed or kOutside. A loop without branches the compiler vectorises,
+  /// for chunks with many such pixels (planes on cell faces: whole rows),
+  /// where a branch per axis and pixel mispredicts. The other pixels keep
+  /// their keys.
+  STEREO_OCCUPANCY_AVX2_CLONE void rekeyChunk(const float* row, int x, int n, int y, Keys* keys) const {
+    const double cx = cx_d_, inv_f = inv_f_d_, bf = bf_d_, inv_c = inv_c_d_, z_cap = z_cap_;
+    const double C_ray_y = (static_cast<double>(y) - cy_d_) * inv_f;
+    const float min_d = min_d_, max_d = max_d_;
+    const uint32_t size0 = size_[0], size1 = size_[1], size2 = size_[2], blocks_per_row = blocks_per_row_;
+    for (int k = 0; k < n; ++k) {
+      const int32_t draw = keys->draw[k];
+      const int32_t rekey = -static_cast<int32_t>(draw == kRekey);  // all ones or 0
+      // A kRekey pixel is measured and in range: its d and z as they are;
+      // the others' are clamped so that their unused keys stay finite.
+      const float d = std::min(std::max(min_d, row[x + k]), max_d);  // NaN: min_d
+      const double z = std::min(bf / static_cast<double>(d), z_cap);
+      const double C_point[3] = {((static_cast<double>(x + k) - cx) * inv_f) * z, C_ray_y * z, 1.0 * z};
+      const int32_t unsure = keys->unsure[k];
+      uint32_t u[3];
+      for (int i = 0; i < 3; ++i) {
+        const double q =
+            (((R_W_C_[i][0] * C_point[0] + R_W_C_[i][1] * C_point[1]) + R_W_C_[i][2] * C_point[2]) + W_origin_[i]) *
+            inv_c;
+        const int32_t t = static_cast<int32_t>(q);
+        const int32_t cell = t - (q < static_cast<double>(t)) - origin_index_[i];  // floorToInt() - origin
+        const int32_t again = -((unsure >> i) & 1);
+        u[i] = static_cast<uint32_t>((cell & again) | (keys->cell[i][k] & ~again));  // a negative cell: huge
+      }
+      const int32_t inside = (u[0] < size0) & (u[1] < size1) & (u[2] < size2);
+      const uint32_t grid_row = u[1] + u[2] * size1;
+      const uint32_t rekeyed = static_cast<uint32_t>(rekey);
+      keys->index[k] = ((u[0] + grid_row * size0) & rekeyed) | (keys->index[k] & ~rekeyed);
+      keys->block[k] = ((grid_row * blocks_per_row + u[0] / kInformationBlock) & rekeyed) | (keys->block[k] & ~rekeyed);
+      keys->draw[k] = ((kOutside + (kKeyed - kOutside) * inside) & rekey) | (draw & ~rekey);
     }
   }
 
@@ -485,6 +544,8 @@ class PixelHitRows {
   float r2_in_, r2_out_;
   float min_d_, max_d_;  ///< the disparities measured()
   uint32_t size_[3], blocks_per_row_;
+  double R_W_C_[3][3], W_origin_[3], inv_c_d_, cx_d_, cy_d_, inv_f_d_, bf_d_;  ///< rekeyChunk()'s, in double
+  int32_t origin_index_[3];
 };
 
 /// The cursor at the second slab, the first inner one.
@@ -648,7 +709,7 @@ uint64_t LineDrawer::drawPixelHits(const RayGrid& grid, const cv::Mat& disparity
           if (keying.measured(row[x + k])) ++pixels, drawExact(x + k, y, row[x + k]);
         continue;
       }
-      keying.keyChunk(row, x, n, y, &keys);
+      if (keying.keyChunk(row, x, n, y, &keys) >= PixelHitRows::kVectorRekeys) keying.rekeyChunk(row, x, n, y, &keys);
       for (int k = 0; k < n; ++k) {
         const int32_t draw = keys.draw[k];
         if (draw == PixelHitRows::kSkip) continue;
