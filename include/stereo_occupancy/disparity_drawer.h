@@ -13,6 +13,7 @@
 #include "stereo_occupancy/disparity_pyramid.h"
 #include "stereo_occupancy/draw_statistics.h"
 #include "stereo_occupancy/grid_blur.h"
+#include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/inverse_sensor_model.h"
 #include "stereo_occupancy/line_drawing.h"
 #include "stereo_occupancy/local_grid.h"
@@ -134,6 +135,12 @@ class DisparityDrawer {
 
   /// Eq. 17 blur around the camera centre; a no-op when the blur is off.
   void blur(const Eigen::Isometry3d& T_W_C, LocalGrid* grid);
+
+  /// encodeGridUpdate() of a grid this drawer drew, on the drawer's workers
+  /// (the same update for any number of them).
+  void encode(const LocalGrid& grid, const Eigen::Vector3d& W_sensor_origin, GridUpdate* update) const {
+    encodeGridUpdate(grid, W_sensor_origin, update, workers_.get());
+  }
 
   /// The pyramid built for the last pyramidal drawing (for inspection and
   /// tests): the min pyramid for line drawing, the max pyramid for ray tracing.

@@ -131,7 +131,7 @@ OccupancyUpdatePtr FrameMapping::mapDisparity(const cv::Mat& disparity, const st
     update.log_odds.reserve(last_cells_);
     update.run_start.reserve(last_runs_);
     update.run_length.reserve(last_runs_);
-    encodeGridUpdate(grid_, T_W_C.translation(), &update);
+    drawer->encode(grid_, T_W_C.translation(), &update);
     last_cells_ = update.log_odds.size();
     last_runs_ = update.run_start.size();
   }

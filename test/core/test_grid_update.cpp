@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <map>
 #include <random>
@@ -45,6 +46,58 @@ TEST(GridUpdate, EncodesKnownCellsAsRuns) {
   bad = u;
   bad.size = Eigen::Vector3i(2, 2, 2);  // runs past the grid's end
   EXPECT_FALSE(bad.isConsistent(&why));
+}
+
+// On a pool, the grid's parts are scanned at once and their runs joined:
+// the update is one scan's bit for bit, with runs across the parts'
+// borders (a part is 2^16 cells), runs at the grid's ends, whole parts
+// known or unknown, zeros inside runs, and grids just above one part.
+TEST(GridUpdate, EncodingOnAPoolEqualsOneScan) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> value(-2.0f, 3.0f);
+  const std::vector<Eigen::Vector3i> sizes = {{64, 32, 40}, {33, 47, 61}, {256, 256, 2}, {65537, 1, 1}};
+  int border_runs = 0;
+  for (const Eigen::Vector3i& size : sizes) {
+    LocalGrid grid;
+    grid.reset(Eigen::Vector3i(-5, 7, 100), size, 0.25);
+    float* cells = grid.data();
+    const size_t n = grid.numCells();
+    // Stretches of known cells (some zeros among them) between unknown gaps, lengths from 1 to 3 parts.
+    std::uniform_int_distribution<size_t> stretch(1, 3 * 65536 / 40);
+    for (size_t i = 0; i < n;) {
+      const size_t known = std::min(n - i, stretch(rng)), unknown = std::min(n - i - known, stretch(rng));
+      for (size_t k = i; k < i + known; ++k) cells[k] = rng() % 13 == 0 ? 0.0f : value(rng);
+      i += known + unknown;
+    }
+    for (size_t k = 65530; k < std::min(n, size_t{65542}); ++k) cells[k] = 1.0f;  // across the first border
+    cells[0] = cells[n - 1] = 0.5f;
+    GridUpdate one;
+    encodeGridUpdate(grid, Eigen::Vector3d(1, 2, 3), &one);
+    for (const size_t border : {size_t{65536}, size_t{131072}})
+      for (size_t k = 0; k < one.run_start.size(); ++k)
+        border_runs += one.run_start[k] < border && one.run_start[k] + one.run_length[k] > border;
+    for (unsigned threads : {2u, 3u}) {
+      WorkerPool pool(threads);
+      GridUpdate many;
+      many.run_start = {1, 2, 3};  // what was there is replaced
+      encodeGridUpdate(grid, Eigen::Vector3d(1, 2, 3), &many, &pool);
+      EXPECT_EQ(many.run_start, one.run_start) << size.transpose() << ", " << threads << " threads";
+      EXPECT_EQ(many.run_length, one.run_length);
+      ASSERT_EQ(many.log_odds.size(), one.log_odds.size());
+      EXPECT_EQ(0, std::memcmp(many.log_odds.data(), one.log_odds.data(), one.log_odds.size() * sizeof(float)));
+      EXPECT_EQ(many.origin_index, one.origin_index);
+      EXPECT_EQ(many.size, one.size);
+      std::string why;
+      EXPECT_TRUE(many.isConsistent(&why)) << why;
+    }
+  }
+  EXPECT_GE(border_runs, 3);  // the joins were tested
+  LocalGrid unknown;          // nothing known: no run
+  unknown.reset(Eigen::Vector3i::Zero(), Eigen::Vector3i(300, 300, 2), 0.25);
+  WorkerPool pool(2);
+  GridUpdate none;
+  encodeGridUpdate(unknown, Eigen::Vector3d::Zero(), &none, &pool);
+  EXPECT_TRUE(none.run_start.empty() && none.log_odds.empty());
 }
 
 // Every value is checked, wherever it stands; finite extremes pass.
