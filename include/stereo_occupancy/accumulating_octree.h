@@ -119,15 +119,15 @@ class AccumulatingOcTree : public octomap::OcTree {
   /// Trees that count the nodes each worker creates (LeafUpdater's counter).
   using WorkerCounters = std::vector<std::unique_ptr<AccumulatingOcTree>>;
 
-  /// addSiblings() for every block of @p parts[0 .. num_parts), each part the
-  /// blocks of one subtree at kPartDepth, on @p pool's workers. The path to
+  /// addSiblings() for every block of the @p parts, each part the blocks of
+  /// one subtree at kPartDepth, on @p pool's workers. The path to
   /// each subtree is made first on this thread, as the first update below it
   /// would make it; the parts below a pruned leaf above kPartDepth (whether
   /// it is expanded depends on their values) go on this thread after the
   /// others. The tree is the same, bit for bit, as addSiblings() on one thread.
   /// @p log (null: none) gets the class changes: each worker's, in worker
   /// order, then this thread's (the same set as on one thread; another order).
-  void addSiblingsInParts(const std::vector<std::vector<SiblingBlock>>& parts, size_t num_parts, WorkerPool* pool,
+  void addSiblingsInParts(const std::vector<const std::vector<SiblingBlock>*>& parts, WorkerPool* pool,
                           WorkerCounters* counters, ClassChangeLog* log = nullptr);
 
   /// Sets the leaf of @p key at @p depth (pruned leaves keep their size).

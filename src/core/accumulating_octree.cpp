@@ -94,8 +94,9 @@ octomap::OcTreeNode* AccumulatingOcTree::partRoot(const octomap::OcTreeKey& key,
   return node;
 }
 
-void AccumulatingOcTree::addSiblingsInParts(const std::vector<std::vector<SiblingBlock>>& parts, size_t num_parts,
+void AccumulatingOcTree::addSiblingsInParts(const std::vector<const std::vector<SiblingBlock>*>& parts,
                                             WorkerPool* pool, WorkerCounters* counters, ClassChangeLog* log) {
+  const size_t num_parts = parts.size();
   struct Start {
     octomap::OcTreeNode* node;
     bool created;
@@ -103,7 +104,7 @@ void AccumulatingOcTree::addSiblingsInParts(const std::vector<std::vector<Siblin
   std::vector<Start> starts(num_parts, Start{nullptr, false});
   std::vector<size_t> on_workers, here;
   for (size_t p = 0; p < num_parts; ++p) {
-    starts[p].node = partRoot(parts[p].front().first, &starts[p].created);
+    starts[p].node = partRoot(parts[p]->front().first, &starts[p].created);
     (starts[p].node ? on_workers : here).push_back(p);
   }
   while (counters->size() < pool->size()) counters->push_back(std::make_unique<AccumulatingOcTree>(resolution));
@@ -138,10 +139,10 @@ void AccumulatingOcTree::addSiblingsInParts(const std::vector<std::vector<Siblin
   try {
     pool->run(on_workers.size(), [&](size_t i, unsigned worker) {
       const size_t p = on_workers[i];
-      LeafUpdater updater((*counters)[worker].get(), starts[p].node, kPartDepth, parts[p].front().first,
+      LeafUpdater updater((*counters)[worker].get(), starts[p].node, kPartDepth, parts[p]->front().first,
                           starts[p].created);
       record(&updater, log ? &log->per_worker[worker] : nullptr, pool->size());
-      for (const SiblingBlock& b : parts[p]) updater.addSiblings(b.first, b.values);
+      for (const SiblingBlock& b : *parts[p]) updater.addSiblings(b.first, b.values);
       if (updater.overflowed()) overflowed[worker] = 1;
     });
   } catch (...) {
@@ -152,7 +153,7 @@ void AccumulatingOcTree::addSiblingsInParts(const std::vector<std::vector<Siblin
   LeafUpdater updater(this);
   if (log && !log->overflowed) record(&updater, &log->changes, 1);
   for (size_t p : here)
-    for (const SiblingBlock& b : parts[p]) updater.addSiblings(b.first, b.values);
+    for (const SiblingBlock& b : *parts[p]) updater.addSiblings(b.first, b.values);
   if (log && updater.overflowed()) log->overflowed = true;
 }
 

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <stdexcept>
 #include <vector>
 
 namespace stereo_occupancy {
@@ -143,11 +144,7 @@ void encodeGridUpdate(const LocalGrid& grid, const Eigen::Vector3d& W_sensor_ori
 
 namespace {
 
-/// One row's stretch of known cells, [x0, x1) with values from log_odds[v] on.
-struct Segment {
-  int64_t y, z, x0, x1;
-  size_t v;
-};
+using Segment = SiblingBlockSlabs::Segment;
 
 /// The update's runs cut at the rows' ends (a run may go on into the next
 /// row), sorted by row, then x. Memory and work follow the runs, never the
@@ -252,25 +249,22 @@ class StripWalk {
   std::vector<float> rows_[4];  ///< one cluster's four rows
 };
 
-}  // namespace
-
-void GridUpdateView::forEachSiblingBlock(const SiblingBlockVisitor& f) const {
-  if (log_odds.empty()) return;
-  const std::vector<Segment> segments = rowSegments(*this);
-  StripWalk strips(*this, segments, f);
-  // The strips in z, then y order: a pair of planes (z0, z0 + 1) are two
-  // consecutive ranges of segments, each sorted by y; merge them by block row.
-  const int64_t oy = origin_index.y(), oz = origin_index.z();
-  size_t s = 0;
-  while (s < segments.size()) {
+/// The strips of segments [s, s_end) (whole pairs of z planes) in z, then y
+/// order: a pair of planes (z0, z0 + 1) are two consecutive ranges of
+/// segments, each sorted by y; merged by block row.
+void walkStrips(const GridUpdateView& u, const std::vector<Segment>& segments, size_t s, size_t s_end,
+                const SiblingBlockVisitor& f) {
+  StripWalk strips(u, segments, f);
+  const int64_t oy = u.origin_index.y(), oz = u.origin_index.z();
+  while (s < s_end) {
     const int64_t z0 = blockStart(segments[s].z, oz);
     size_t plane_end[2], cursor[2];
     cursor[0] = s;
     size_t e = s;
-    while (e < segments.size() && segments[e].z == z0) ++e;
+    while (e < s_end && segments[e].z == z0) ++e;
     plane_end[0] = e;
     cursor[1] = e;
-    while (e < segments.size() && segments[e].z == z0 + 1) ++e;
+    while (e < s_end && segments[e].z == z0 + 1) ++e;
     plane_end[1] = e;
     s = e;
     for (;;) {
@@ -289,6 +283,33 @@ void GridUpdateView::forEachSiblingBlock(const SiblingBlockVisitor& f) const {
       strips.visit(y0, z0, begin, end);
     }
   }
+}
+
+}  // namespace
+
+void GridUpdateView::forEachSiblingBlock(const SiblingBlockVisitor& f) const {
+  if (log_odds.empty()) return;
+  const std::vector<Segment> segments = rowSegments(*this);
+  walkStrips(*this, segments, 0, segments.size(), f);
+}
+
+SiblingBlockSlabs::SiblingBlockSlabs(const GridUpdateView& update, int slab_cells)
+    : update_(update), segments_(rowSegments(update)) {
+  if (slab_cells <= 0 || slab_cells % 2 != 0) throw std::invalid_argument("slab_cells must be even and > 0");
+  // A pair of planes (z0 even in global cells) never straddles a border of even slabs.
+  const int64_t oz = update.origin_index.z();
+  int64_t slab = std::numeric_limits<int64_t>::min();
+  for (size_t k = 0; k < segments_.size(); ++k) {
+    const int64_t global_z = oz + segments_[k].z;
+    const int64_t here = (global_z >= 0 ? global_z : global_z - (slab_cells - 1)) / slab_cells;  // floor
+    if (here != slab) slab_begin_.push_back(k);
+    slab = here;
+  }
+}
+
+void SiblingBlockSlabs::visit(size_t slab, const SiblingBlockVisitor& f) const {
+  const size_t end = slab + 1 < slab_begin_.size() ? slab_begin_[slab + 1] : segments_.size();
+  walkStrips(update_, segments_, slab_begin_[slab], end, f);
 }
 
 }  // namespace stereo_occupancy

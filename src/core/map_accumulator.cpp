@@ -25,16 +25,26 @@ bool MapAccumulatorConfig::isValid(std::string* why) const {
 /// parts and kKeptParts are let go.
 constexpr size_t kKeptPartsFactor = 4, kKeptParts = 1024;
 
-/// The parts of one update for the workers, kept from update to update
-/// (their vectors keep their memory).
-struct MapAccumulator::Fusion {
-  explicit Fusion(unsigned threads) : pool(threads) {}
-  WorkerPool pool;
-  AccumulatingOcTree::WorkerCounters counters;
+/// The parts of one slab of an update (SiblingBlockSlabs), gathered by one
+/// worker; kept from update to update (their vectors keep their memory).
+struct SlabParts {
   std::vector<std::vector<AccumulatingOcTree::SiblingBlock>> parts;  ///< [0, used) hold this update's
   std::vector<uint64_t> part_block;                                  ///< packed BlockIndex of each part
   std::unordered_map<uint64_t, size_t> part_of;                      ///< packed BlockIndex -> part
   size_t used = 0;
+};
+
+/// Slabs kept beyond an update's: more than kKeptSlabsFactor times its
+/// slabs and kKeptSlabs are let go.
+constexpr size_t kKeptSlabsFactor = 4, kKeptSlabs = 64;
+
+/// The parts of one update for the workers, slab by slab.
+struct MapAccumulator::Fusion {
+  explicit Fusion(unsigned threads) : pool(threads) {}
+  WorkerPool pool;
+  AccumulatingOcTree::WorkerCounters counters;
+  std::vector<SlabParts> slabs;                                             ///< [0, slabs used) hold this update's
+  std::vector<const std::vector<AccumulatingOcTree::SiblingBlock>*> parts;  ///< all slabs' parts, in z order
 };
 
 MapAccumulator::MapAccumulator(const MapAccumulatorConfig& config) : config_(config) {
@@ -377,46 +387,66 @@ void MapAccumulator::fuseInOrder(const GridUpdateView& update) {
   if (log && updater.overflowed()) log->overflowed = true;
 }
 
-void MapAccumulator::fuseInParts(const GridUpdateView& update) {
-  static_assert(kBlockCells == 1 << (16 - AccumulatingOcTree::kPartDepth), "a part is one change-tracking block");
-  const int offset = static_cast<int>(tree_->coordToKey(0.0));
-  Fusion& f = *fusion_;
-  for (size_t p = 0; p < f.used; ++p) f.parts[p].clear();
-  f.used = 0;
-  f.part_of.clear();
-  f.part_block.clear();
-  // The blocks of each part in the order of the walk; consecutive sibling
-  // blocks mostly lie in the same part, so the map is asked when it changes.
+namespace {
+
+/// Gathers slab @p slab's sibling blocks into @p out's parts, one part per
+/// kBlockCells cube, each in the walk's order (the parts in the order the
+/// walk meets them).
+void gatherSlab(const SiblingBlockSlabs& slabs, size_t slab, int key_offset, SlabParts* out) {
+  for (size_t p = 0; p < out->used; ++p) out->parts[p].clear();
+  out->used = 0;
+  out->part_of.clear();
+  out->part_block.clear();
+  // Consecutive sibling blocks mostly lie in the same part, so the map is asked when it changes.
   uint64_t last_block = ~uint64_t{0};
   std::vector<AccumulatingOcTree::SiblingBlock>* part = nullptr;
-  update.forEachSiblingBlock([&](const Eigen::Vector3i& g, const float(&values)[8]) {
+  slabs.visit(slab, [&](const Eigen::Vector3i& g, const float(&values)[8]) {
     const uint64_t block = packBlock(Eigen::Vector3i(blockOf(g.x()), blockOf(g.y()), blockOf(g.z())));
     if (block != last_block) {
-      const auto inserted = f.part_of.emplace(block, f.used);
+      const auto inserted = out->part_of.emplace(block, out->used);
       if (inserted.second) {
-        if (f.parts.size() == f.used) f.parts.emplace_back();
-        f.part_block.push_back(block);
-        ++f.used;
+        if (out->parts.size() == out->used) out->parts.emplace_back();
+        out->part_block.push_back(block);
+        ++out->used;
       }
-      part = &f.parts[inserted.first->second];
+      part = &out->parts[inserted.first->second];
       last_block = block;
     }
     AccumulatingOcTree::SiblingBlock b;
-    b.first = octomap::OcTreeKey(static_cast<octomap::key_type>(g.x() + offset),
-                                 static_cast<octomap::key_type>(g.y() + offset),
-                                 static_cast<octomap::key_type>(g.z() + offset));
+    b.first = octomap::OcTreeKey(static_cast<octomap::key_type>(g.x() + key_offset),
+                                 static_cast<octomap::key_type>(g.y() + key_offset),
+                                 static_cast<octomap::key_type>(g.z() + key_offset));
     std::copy(values, values + 8, b.values);
     part->push_back(b);
   });
-  tree_->addSiblingsInParts(f.parts, f.used, &f.pool, &f.counters, recordingLog());
   // A part holds at most one block's 512 sibling blocks; only a rare huge
   // update leaves many more parts than the next needs: let them go.
-  if (f.parts.size() > kKeptPartsFactor * f.used + kKeptParts) f.parts.resize(f.used);
-  for (const uint64_t block : f.part_block) {
-    if (!all_changed_) changed_blocks_.insert(block);
-    const Eigen::Vector3i b = unpackBlock(block);
-    dirty_tiles_.insert(packedTileOf(b));
-  }
+  if (out->parts.size() > kKeptPartsFactor * out->used + kKeptParts) out->parts.resize(out->used);
+}
+
+}  // namespace
+
+void MapAccumulator::fuseInParts(const GridUpdateView& update) {
+  static_assert(kBlockCells == 1 << (16 - AccumulatingOcTree::kPartDepth), "a part is one change-tracking block");
+  Fusion& f = *fusion_;
+  // The workers gather the slabs' parts at once (a part never spans two
+  // slabs), then fuse the parts: the same parts, each in the same order, as
+  // one walk of the whole update.
+  const SiblingBlockSlabs slabs(update, kBlockCells);
+  if (f.slabs.size() < slabs.size()) f.slabs.resize(slabs.size());
+  const int key_offset = static_cast<int>(tree_->coordToKey(0.0));
+  f.pool.run(slabs.size(), [&](size_t slab, unsigned) { gatherSlab(slabs, slab, key_offset, &f.slabs[slab]); });
+  f.parts.clear();
+  for (size_t slab = 0; slab < slabs.size(); ++slab)
+    for (size_t p = 0; p < f.slabs[slab].used; ++p) f.parts.push_back(&f.slabs[slab].parts[p]);
+  tree_->addSiblingsInParts(f.parts, &f.pool, &f.counters, recordingLog());
+  for (size_t slab = 0; slab < slabs.size(); ++slab)
+    for (const uint64_t block : f.slabs[slab].part_block) {
+      if (!all_changed_) changed_blocks_.insert(block);
+      const Eigen::Vector3i b = unpackBlock(block);
+      dirty_tiles_.insert(packedTileOf(b));
+    }
+  if (f.slabs.size() > kKeptSlabsFactor * slabs.size() + kKeptSlabs) f.slabs.resize(slabs.size());
 }
 
 size_t MapAccumulator::prune() {
