@@ -94,8 +94,8 @@ struct GridUpdateView {
 /// An update's sibling blocks (GridUpdateView::forEachSiblingBlock()) cut
 /// into slabs of global z, so that workers can walk the slabs at once: the
 /// parallel fusion's parts never span two slabs of their size. Visiting the
-/// slabs 0, 1, ... in turn is forEachSiblingBlock()'s walk. The update's
-/// arrays must outlive it.
+/// slabs 0, 1, ... in turn is forEachSiblingBlock()'s walk. It keeps a copy
+/// of the view; the arrays it points to must outlive it.
 class SiblingBlockSlabs {
  public:
   /// One row's stretch of the update's cells, [x0, x1) in local cells,
@@ -117,7 +117,7 @@ class SiblingBlockSlabs {
   void visit(size_t slab, const SiblingBlockVisitor& f) const;
 
  private:
-  const GridUpdateView& update_;
+  const GridUpdateView update_;     ///< a copy: a GridUpdate's view would be a temporary
   std::vector<Segment> segments_;   ///< the rows' stretches in z, y, x order
   std::vector<size_t> slab_begin_;  ///< each slab's first segment
 };

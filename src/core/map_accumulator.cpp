@@ -21,9 +21,9 @@ bool MapAccumulatorConfig::isValid(std::string* why) const {
   return true;
 }
 
-/// Parts kept beyond an update's: more than kKeptPartsFactor times its
-/// parts and kKeptParts are let go.
-constexpr size_t kKeptPartsFactor = 4, kKeptParts = 1024;
+/// Parts of a slab kept beyond an update's: more than kKeptPartsFactor times
+/// its parts and kKeptParts are let go (each keeps its blocks' memory).
+constexpr size_t kKeptPartsFactor = 4, kKeptParts = 64;
 
 /// The parts of one slab of an update (SiblingBlockSlabs), gathered by one
 /// worker; kept from update to update (their vectors keep their memory).
@@ -34,9 +34,8 @@ struct SlabParts {
   size_t used = 0;
 };
 
-/// Slabs kept beyond an update's: more than kKeptSlabsFactor times its
-/// slabs and kKeptSlabs are let go.
-constexpr size_t kKeptSlabsFactor = 4, kKeptSlabs = 64;
+/// Slabs kept beyond an update's (with their parts' memory); the others are let go.
+constexpr size_t kKeptSlabs = 16;
 
 /// The parts of one update for the workers, slab by slab.
 struct MapAccumulator::Fusion {
@@ -446,7 +445,8 @@ void MapAccumulator::fuseInParts(const GridUpdateView& update) {
       const Eigen::Vector3i b = unpackBlock(block);
       dirty_tiles_.insert(packedTileOf(b));
     }
-  if (f.slabs.size() > kKeptSlabsFactor * slabs.size() + kKeptSlabs) f.slabs.resize(slabs.size());
+  // Slabs beyond this update's keep an earlier update's parts: only a few.
+  if (f.slabs.size() > slabs.size() + kKeptSlabs) f.slabs.resize(slabs.size() + kKeptSlabs);
 }
 
 size_t MapAccumulator::prune() {

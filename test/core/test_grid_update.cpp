@@ -51,19 +51,20 @@ TEST(GridUpdate, EncodesKnownCellsAsRuns) {
 
 // On a pool, the grid's parts are scanned at once and their runs joined:
 // the update is one scan's bit for bit, with runs across the parts'
-// borders (a part is 2^16 cells), runs at the grid's ends, whole parts
-// known or unknown, zeros inside runs, and grids just above one part.
+// borders (a part is 2^16 cells), a run across a whole part, a part all
+// unknown, runs at the grid's ends, zeros inside runs, and a grid just
+// above one part.
 TEST(GridUpdate, EncodingOnAPoolEqualsOneScan) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> value(-2.0f, 3.0f);
-  const std::vector<Eigen::Vector3i> sizes = {{64, 32, 40}, {33, 47, 61}, {256, 256, 2}, {65537, 1, 1}};
+  const std::vector<Eigen::Vector3i> sizes = {{64, 32, 40}, {33, 47, 61}, {256, 256, 2}, {65537, 1, 1}, {100, 70, 40}};
   int border_runs = 0;
   for (const Eigen::Vector3i& size : sizes) {
     LocalGrid grid;
     grid.reset(Eigen::Vector3i(-5, 7, 100), size, 0.25);
     float* cells = grid.data();
     const size_t n = grid.numCells();
-    // Stretches of known cells (some zeros among them) between unknown gaps, lengths from 1 to 3 parts.
+    // Stretches of known cells (some zeros among them) between unknown gaps, of 1 to 4915 cells.
     std::uniform_int_distribution<size_t> stretch(1, 3 * 65536 / 40);
     for (size_t i = 0; i < n;) {
       const size_t known = std::min(n - i, stretch(rng)), unknown = std::min(n - i - known, stretch(rng));
@@ -71,6 +72,10 @@ TEST(GridUpdate, EncodingOnAPoolEqualsOneScan) {
       i += known + unknown;
     }
     for (size_t k = 65530; k < std::min(n, size_t{65542}); ++k) cells[k] = 1.0f;  // across the first border
+    if (n > 3 * 65536) {  // one run over a whole part and two borders; the part after it unknown
+      for (size_t k = 65536 - 3; k < 2 * 65536 + 3; ++k) cells[k] = 2.0f;
+      for (size_t k = 2 * 65536 + 3; k < 3 * 65536; ++k) cells[k] = LocalGrid::kUnknown;
+    }
     cells[0] = cells[n - 1] = 0.5f;
     GridUpdate one;
     encodeGridUpdate(grid, Eigen::Vector3d(1, 2, 3), &one);
@@ -92,7 +97,7 @@ TEST(GridUpdate, EncodingOnAPoolEqualsOneScan) {
       EXPECT_TRUE(many.isConsistent(&why)) << why;
     }
   }
-  EXPECT_GE(border_runs, 3);  // the joins were tested
+  EXPECT_GE(border_runs, 4);  // the joins were tested, one across two borders
   LocalGrid unknown;          // nothing known: no run
   unknown.reset(Eigen::Vector3i::Zero(), Eigen::Vector3i(300, 300, 2), 0.25);
   WorkerPool pool(2);
