@@ -25,6 +25,8 @@ bool MapAccumulatorConfig::isValid(std::string* why) const {
 /// its parts and kKeptParts are let go (each keeps its blocks' memory).
 constexpr size_t kKeptPartsFactor = 4, kKeptParts = 64;
 
+namespace {
+
 /// The parts of one slab of an update (SiblingBlockSlabs), gathered by one
 /// worker; kept from update to update (their vectors keep their memory).
 struct SlabParts {
@@ -36,6 +38,8 @@ struct SlabParts {
 
 /// Slabs kept beyond an update's (with their parts' memory); the others are let go.
 constexpr size_t kKeptSlabs = 16;
+
+}  // namespace
 
 /// The parts of one update for the workers, slab by slab.
 struct MapAccumulator::Fusion {
