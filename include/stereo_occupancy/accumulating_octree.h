@@ -138,8 +138,16 @@ class AccumulatingOcTree : public octomap::OcTree {
   /// octomap's prune() below the node of @p key at @p depth only: every
   /// node whose eight children are leaves of one value becomes a leaf of
   /// it, bottom up; each cell keeps its value. Work follows the subtree.
+  /// With @p deepest, only nodes at depths [depth, deepest] merge (the
+  /// ones below were merged already: their parts, one at a time).
   /// Returns how many nodes became leaves.
-  size_t pruneBelow(const octomap::OcTreeKey& key, unsigned depth);
+  size_t pruneBelow(const octomap::OcTreeKey& key, unsigned depth, unsigned deepest = 15);
+
+  /// The keys of the nodes at @p part_depth below the node of @p key at
+  /// @p depth that have children (the ones pruneBelow() could merge), in
+  /// the tree's child order.
+  std::vector<octomap::OcTreeKey> innerNodesBelow(const octomap::OcTreeKey& key, unsigned depth,
+                                                  unsigned part_depth) const;
 
   /// Deletes the node of @p key at @p depth with everything below it, and
   /// the ancestors left without children (a childless inner node would read

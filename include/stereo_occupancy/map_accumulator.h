@@ -199,6 +199,16 @@ class MapAccumulator {
   /// takes less memory; clamped free space mostly goes from eight leaves to
   /// one). Costs what the tile holds. Returns how many nodes became leaves.
   size_t mergeEqualLeaves(const TileIndex& tile);
+  /// mergeEqualLeaves() in steps of one part at a time: the keys of
+  /// @p tile's parts (AccumulatingOcTree::kPartDepth nodes) that have
+  /// children, for mergePart(); then mergeTileAbove() merges what lies
+  /// between the parts and the tile. The steps in turn, with nothing fused
+  /// between them, give mergeEqualLeaves()' tree.
+  std::vector<octomap::OcTreeKey> partsToMerge(const TileIndex& tile) const;
+  /// Merges the equal leaves below one part of partsToMerge(). Returns how many nodes became leaves.
+  size_t mergePart(const octomap::OcTreeKey& part);
+  /// Merges @p tile's nodes above its parts (depths kTileDepth to kPartDepth - 1).
+  size_t mergeTileAbove(const TileIndex& tile);
   /// Sets leaves, clamped, in tiles that hold nothing (a tile back from disk).
   void insertLeaves(const std::vector<Leaf>& leaves);
   /// The tiles changed since the last call (by updates, clearBox, or leaves

@@ -1,6 +1,8 @@
 #include "stereo_occupancy/accumulating_octree.h"
 
+#include <algorithm>
 #include <array>
+#include <vector>
 
 namespace stereo_occupancy {
 
@@ -54,8 +56,9 @@ bool AccumulatingOcTree::dropNode(const octomap::OcTreeKey& key, unsigned depth)
   return true;
 }
 
-size_t AccumulatingOcTree::pruneBelow(const octomap::OcTreeKey& key, unsigned depth) {
+size_t AccumulatingOcTree::pruneBelow(const octomap::OcTreeKey& key, unsigned depth, unsigned deepest) {
   if (!root || depth > tree_depth) return 0;
+  deepest = std::min(deepest, tree_depth - 1);
   octomap::OcTreeNode* node = root;
   for (unsigned d = 0; d < depth; ++d) {
     const unsigned pos = octomap::computeChildIdx(key, static_cast<int>(tree_depth - 1 - d));
@@ -65,12 +68,51 @@ size_t AccumulatingOcTree::pruneBelow(const octomap::OcTreeKey& key, unsigned de
   size_t merged = 0;
   // Each level from the leaves' parents up: a node merged at one level may
   // make its parent mergeable at the next (as prune(), without its early end).
-  for (unsigned level = tree_depth - 1; level + 1 > depth && nodeHasChildren(node); --level) {
+  for (unsigned level = deepest; level + 1 > depth && nodeHasChildren(node); --level) {
     unsigned pruned = 0;
     pruneRecurs(node, depth, level, pruned);
     merged += pruned;
   }
   return merged;
+}
+
+std::vector<octomap::OcTreeKey> AccumulatingOcTree::innerNodesBelow(const octomap::OcTreeKey& key, unsigned depth,
+                                                                    unsigned part_depth) const {
+  std::vector<octomap::OcTreeKey> keys;
+  if (!root || depth > part_depth || part_depth >= tree_depth) return keys;
+  const octomap::OcTreeNode* node = root;
+  for (unsigned d = 0; d < depth; ++d) {
+    const unsigned pos = octomap::computeChildIdx(key, static_cast<int>(tree_depth - 1 - d));
+    if (!nodeChildExists(node, pos)) return keys;  // nothing there, or a coarser leaf
+    node = getNodeChild(node, pos);
+  }
+  // Depth first, children in index order; a child's key sets its level's bit.
+  struct Visit {
+    const octomap::OcTreeNode* node;
+    unsigned depth;
+    octomap::OcTreeKey key;
+  };
+  std::vector<Visit> stack{{node, depth, key}};
+  while (!stack.empty()) {
+    const Visit v = stack.back();
+    stack.pop_back();
+    if (!nodeHasChildren(v.node)) continue;
+    if (v.depth == part_depth) {
+      keys.push_back(v.key);
+      continue;
+    }
+    const unsigned bit = tree_depth - 1 - v.depth;
+    for (unsigned i = 8; i-- > 0;) {  // pushed last to first: visited first to last
+      if (!nodeChildExists(v.node, i)) continue;
+      octomap::OcTreeKey child = v.key;
+      for (unsigned a = 0; a < 3; ++a) {
+        child[a] = static_cast<octomap::key_type>(child[a] & ~(1u << bit));
+        if (i & (1u << a)) child[a] = static_cast<octomap::key_type>(child[a] | (1u << bit));
+      }
+      stack.push_back({getNodeChild(v.node, i), v.depth + 1, child});
+    }
+  }
+  return keys;
 }
 
 octomap::OcTreeNode* AccumulatingOcTree::partRoot(const octomap::OcTreeKey& key, bool* created) {

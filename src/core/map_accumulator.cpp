@@ -587,6 +587,28 @@ size_t MapAccumulator::mergeEqualLeaves(const TileIndex& tile) {
   return merged;
 }
 
+std::vector<octomap::OcTreeKey> MapAccumulator::partsToMerge(const TileIndex& tile) const {
+  if (!tileInKeyRange(tile)) return {};
+  octomap::OcTreeKey lo, hi;
+  tileKeys(tile, static_cast<int>(tree_->coordToKey(0.0)), &lo, &hi);
+  return tree_->innerNodesBelow(lo, kTileDepth, AccumulatingOcTree::kPartDepth);
+}
+
+size_t MapAccumulator::mergePart(const octomap::OcTreeKey& part) {
+  const size_t merged = tree_->pruneBelow(part, AccumulatingOcTree::kPartDepth);
+  inner_stale_ = inner_stale_ || merged > 0;
+  return merged;
+}
+
+size_t MapAccumulator::mergeTileAbove(const TileIndex& tile) {
+  if (!tileInKeyRange(tile)) return 0;
+  octomap::OcTreeKey lo, hi;
+  tileKeys(tile, static_cast<int>(tree_->coordToKey(0.0)), &lo, &hi);
+  const size_t merged = tree_->pruneBelow(lo, kTileDepth, AccumulatingOcTree::kPartDepth - 1);
+  inner_stale_ = inner_stale_ || merged > 0;
+  return merged;
+}
+
 size_t MapAccumulator::dropTile(const TileIndex& tile) {
   if (!tileInKeyRange(tile)) return 0;
   octomap::OcTreeKey lo, hi;
