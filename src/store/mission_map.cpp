@@ -51,23 +51,80 @@ bool MissionMap::integrate(const GridUpdateView& update, std::string* why) {
   return live_.integrate(update, why);
 }
 
-MaintainResult MissionMap::maintain() {
+MaintainResult MissionMap::maintain(MergeTiming merges) {
   MaintainResult result;
   collectDirtyTiles();
   if (!store_) {
     result.leaves_dropped = live_.prune();
+  } else {
+    const Eigen::AlignedBox3d kept = window();
+    if (!kept.isEmpty() && live_.config().max_extent_m > 0.0) {
+      const std::vector<uint64_t> resident(resident_.begin(), resident_.end());
+      for (uint64_t key : resident)
+        if (!kept.intersects(live_.tileBox(TileStore::unpack(key)))) storeTile(key, &result);
+    }
+  }
+  finishQueuedMerges(&result);
+  if (merges == MergeTiming::kSpread && live_.config().compress_map)
+    queueChangedTiles();
+  else
     mergeChangedTiles(&result);
-    return result;
-  }
-  const Eigen::AlignedBox3d kept = window();
-  if (!kept.isEmpty() && live_.config().max_extent_m > 0.0) {
-    const std::vector<uint64_t> resident(resident_.begin(), resident_.end());
-    for (uint64_t key : resident)
-      if (!kept.intersects(live_.tileBox(TileStore::unpack(key)))) storeTile(key, &result);
-  }
-  mergeChangedTiles(&result);
-  freed_memory_ = freed_memory_ || result.tiles_stored > 0 || result.nodes_merged > 0;
+  freed_memory_ = freed_memory_ || (store_ && (result.tiles_stored > 0 || result.nodes_merged > 0));
   return result;
+}
+
+void MissionMap::queueChangedTiles() {
+  size_t parts = 0;
+  for (uint64_t key : unmerged_) {
+    QueuedMerge q;
+    q.tile = key;
+    q.parts = live_.partsToMerge(TileStore::unpack(key));
+    parts += q.parts.size();
+    queued_merges_.push_back(std::move(q));
+  }
+  unmerged_.clear();
+  parts_per_step_ = std::max<size_t>(1, (parts + kMergeSteps - 1) / kMergeSteps);
+  spread_merged_ = 0;
+}
+
+MaintainResult MissionMap::mergeStep() {
+  MaintainResult result;
+  result.nodes_merged = mergeQueued(parts_per_step_);
+  spread_merged_ += result.nodes_merged;
+  if (queued_merges_.empty() && spread_merged_ > 0 && store_) freed_memory_ = true;
+  return result;
+}
+
+void MissionMap::finishQueuedMerges(MaintainResult* result) {
+  result->nodes_merged += mergeQueued(std::numeric_limits<size_t>::max());
+}
+
+size_t MissionMap::mergeQueued(size_t parts) {
+  size_t merged = 0;
+  while (!queued_merges_.empty()) {
+    QueuedMerge& q = queued_merges_.front();
+    for (; q.next < q.parts.size() && parts > 0; ++q.next, --parts) {
+      const size_t n = live_.mergePart(q.parts[q.next]);
+      q.merged += n;
+      merged += n;
+    }
+    if (q.next < q.parts.size()) break;  // the budget is spent
+    const size_t above = live_.mergeTileAbove(TileStore::unpack(q.tile));
+    q.merged += above;
+    merged += above;
+    if (q.merged > 0) unpublished_.insert(q.tile);  // the outputs encode the tile's new leaves
+    queued_merges_.pop_front();
+    if (parts == 0) break;
+  }
+  return merged;
+}
+
+bool MissionMap::unqueue(uint64_t key) {
+  const auto it =
+      std::find_if(queued_merges_.begin(), queued_merges_.end(), [&](const QueuedMerge& q) { return q.tile == key; });
+  if (it == queued_merges_.end()) return false;
+  queued_merges_.erase(it);
+  return true;
 }
 
 Eigen::AlignedBox3d MissionMap::window() const {
@@ -80,8 +137,10 @@ Eigen::AlignedBox3d MissionMap::window() const {
 void MissionMap::storeTile(uint64_t key, MaintainResult* result) {
   const TileIndex tile = TileStore::unpack(key);
   // Unchanged since the store had it: its copy is current.
+  const bool queued = unqueue(key);  // its merges are done here, in one go
   if (unsaved_.erase(key)) {
-    if (unmerged_.erase(key) && live_.config().compress_map) result->nodes_merged += live_.mergeEqualLeaves(tile);
+    if ((unmerged_.erase(key) || queued) && live_.config().compress_map)
+      result->nodes_merged += live_.mergeEqualLeaves(tile);
     store_->put(tile, live_.tileLeaves(tile));
   }
   if (live_.dropTile(tile) > 0) ++result->tiles_stored;
@@ -177,6 +236,7 @@ size_t MissionMap::clearBox(const Eigen::Vector3d& W_min, const Eigen::Vector3d&
 void MissionMap::reset() {
   live_.reset();
   unmerged_.clear();
+  queued_merges_.clear();
   resident_.clear();
   unsaved_.clear();
   unpublished_.clear();
@@ -187,6 +247,7 @@ void MissionMap::reset() {
 void MissionMap::load(const std::string& path) {
   live_.load(path);
   unmerged_.clear();
+  queued_merges_.clear();
   resident_.clear();
   unsaved_.clear();
   unpublished_.clear();

@@ -8,11 +8,13 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <fstream>
 #include <iterator>
 #include <memory>
+#include <sstream>
 #include <string>
 #include <thread>
 
@@ -323,6 +325,107 @@ TEST(MissionMap, MaintainMergesEqualLeaves) {
       EXPECT_EQ(tree.getNumLeafNodes(), 1u + 2 * MapAccumulator::kPruneOrigins) << path;
     }
   }
+}
+
+namespace {
+/// The tree's full (.ot) bytes.
+std::string fullBytes(const octomap::OcTree& tree) {
+  std::ostringstream out;
+  tree.write(out);
+  return out.str();
+}
+
+/// Clamped free space over two tiles, with occupied cells sprinkled in the
+/// first, so that some nodes merge and some do not: 64 parts with children;
+/// in the second tile, nodes above the parts merge too (32-cell cubes).
+void flyOverTwoTiles(MissionMap* mission) {
+  static_assert(MapAccumulator::kTileCells == 256, "the box straddles the first tile border");
+  const GridUpdate box = filledBox(Eigen::Vector3i(192, 0, 0), Eigen::Vector3i(128, 64, 32), -0.4f);
+  for (int r = 0; r < 6; ++r) ASSERT_TRUE(mission->integrate(box));
+  for (int i = 0; i < 40; ++i)
+    ASSERT_TRUE(mission->integrate(singleCell(Eigen::Vector3i(192 + (i * 37) % 64, (i * 11) % 64, i % 32), 2.0f)));
+}
+}  // namespace
+
+// maintain(kSpread) merges nothing; mergeStep() then merges a part at a time,
+// kMergeSteps calls at most, and ends in the tree one maintain() makes.
+TEST(MissionMap, SpreadMergesEndInTheTreeOfOneMerge) {
+  MissionMap now{MapAccumulatorConfig()}, spread{MapAccumulatorConfig()};
+  flyOverTwoTiles(&now);
+  flyOverTwoTiles(&spread);
+  const size_t leaves_before = spread.live().tree().getNumLeafNodes();
+  const size_t merged_now = now.maintain().nodes_merged;
+  ASSERT_GT(merged_now, 1000u);
+  EXPECT_EQ(spread.maintain(MergeTiming::kSpread).nodes_merged, 0u);
+  EXPECT_EQ(spread.live().tree().getNumLeafNodes(), leaves_before);
+  ASSERT_TRUE(spread.mergesQueued());
+  size_t steps = 0, merged = 0, largest = 0;
+  while (spread.mergesQueued()) {
+    const size_t step = spread.mergeStep().nodes_merged;
+    merged += step;
+    largest = std::max(largest, step);
+    ASSERT_LE(++steps, MissionMap::kMergeSteps);
+  }
+  EXPECT_GE(steps, MissionMap::kMergeSteps / 2);
+  EXPECT_LE(largest, merged_now / 4) << "the merges are spread";
+  EXPECT_EQ(merged, merged_now);
+  EXPECT_EQ(fullBytes(spread.live().tree()), fullBytes(now.live().tree()));
+  EXPECT_EQ(spread.mergeStep().nodes_merged, 0u) << "nothing queued";
+}
+
+// Updates fused between the steps keep their cells: every cell of a map that
+// never merges has the same value in the map whose merges were spread.
+TEST(MissionMap, SpreadMergesKeepEveryCellsValue) {
+  MapAccumulatorConfig uncompressed;
+  uncompressed.compress_map = false;
+  MissionMap plain(uncompressed), spread{MapAccumulatorConfig()};
+  flyOverTwoTiles(&plain);
+  flyOverTwoTiles(&spread);
+  EXPECT_EQ(plain.maintain(MergeTiming::kSpread).nodes_merged, 0u);
+  EXPECT_FALSE(plain.mergesQueued()) << "compress_map false: nothing to merge";
+  spread.maintain(MergeTiming::kSpread);
+  // Stripes of occupied and free cells across merged and unmerged parts.
+  for (int i = 0; spread.mergesQueued(); ++i) {
+    spread.mergeStep();
+    const GridUpdate stripe =
+        filledBox(Eigen::Vector3i(192 + 8 * i, 2 * i, i % 32), Eigen::Vector3i(8, 30, 2), i % 2 ? 0.85f : -0.4f);
+    ASSERT_TRUE(plain.integrate(stripe));
+    ASSERT_TRUE(spread.integrate(stripe));
+  }
+  const octomap::OcTree& merged = spread.live().tree();
+  EXPECT_LT(merged.getNumLeafNodes(), plain.live().tree().getNumLeafNodes() / 2);
+  size_t cells = 0;
+  for (auto it = plain.live().tree().begin_leafs(), end = plain.live().tree().end_leafs(); it != end; ++it) {
+    ASSERT_EQ(it.getDepth(), 16u);
+    const octomap::OcTreeNode* n = merged.search(it.getKey());
+    ASSERT_NE(n, nullptr);
+    ASSERT_EQ(n->getLogOdds(), it->getLogOdds());
+    ++cells;
+  }
+  EXPECT_GT(cells, 250000u);
+}
+
+// A tile that goes to the store while its merges are queued is merged first,
+// as one whose merges were done.
+TEST(MissionMap, QueuedTileGoesToTheStoreMerged) {
+  const GridUpdate cube = filledBox(Eigen::Vector3i(8, 8, 0), Eigen::Vector3i(8, 8, 8), -0.4f);
+  MapAccumulatorConfig windowed;
+  windowed.max_extent_m = 40.0;
+  MissionMap mission(windowed);
+  mission.attachStore(std::make_shared<TileStore>(freshDatabase("queued_merge"), kRes));
+  for (int r = 0; r < 6; ++r) ASSERT_TRUE(mission.integrate(cube));
+  EXPECT_EQ(mission.maintain(MergeTiming::kSpread).nodes_merged, 0u);
+  ASSERT_TRUE(mission.mergesQueued());
+  for (int i = 0; i < 2 * static_cast<int>(MapAccumulator::kPruneOrigins); ++i)
+    ASSERT_TRUE(mission.integrate(singleCell(Eigen::Vector3i(4000 + i % 40, i % 7, i % 3), 0.4f)));
+  const MaintainResult away = mission.maintain(MergeTiming::kSpread);
+  EXPECT_GE(away.tiles_stored, 1u);
+  EXPECT_EQ(away.nodes_merged, 64u + 8u + 1u);
+  ASSERT_TRUE(mission.store()->flush());
+  std::vector<MapAccumulator::Leaf> leaves;
+  ASSERT_TRUE(mission.store()->get(MapAccumulator::TileIndex(0, 0, 0), &leaves));
+  ASSERT_EQ(leaves.size(), 1u);
+  EXPECT_EQ(leaves[0].depth, 13u);
 }
 
 // A tile's leaves after merging are its own: octomap's box iterator also

@@ -4,6 +4,7 @@
 /// vehicle in RAM, and the tiles it flew away from in a TileStore on disk,
 /// which come back when the vehicle returns.
 
+#include <deque>
 #include <memory>
 #include <string>
 #include <unordered_set>
@@ -22,11 +23,19 @@ struct MaintainResult {
   size_t nodes_merged = 0;    ///< nodes whose eight equal leaves became one (MapAccumulator::mergeEqualLeaves)
 };
 
+/// When maintain() merges the changed tiles' equal leaves.
+enum class MergeTiming {
+  kNow,     ///< all in the call
+  kSpread,  ///< queued: mergeStep() merges them over the next kMergeSteps calls
+};
+
 /// MapAccumulator + TileStore. Not thread-safe, as MapAccumulator; the
 /// store it hands tiles to is.
 class MissionMap {
  public:
   using TileIndex = MapAccumulator::TileIndex;
+  /// mergeStep() calls over which maintain(MergeTiming::kSpread)'s merges are spread.
+  static constexpr size_t kMergeSteps = 16;
 
   /// @throws std::invalid_argument if the config is not valid.
   explicit MissionMap(const MapAccumulatorConfig& config);
@@ -51,8 +60,18 @@ class MissionMap {
   /// first); without one, prunes. Then, with compress_map, merges the equal
   /// leaves of the tiles changed since the last call (each cell keeps its
   /// value; clamped free space takes an eighth of the memory and of the
-  /// store). See takeFreedMemory().
-  MaintainResult maintain();
+  /// store). See takeFreedMemory(). With MergeTiming::kSpread the merges
+  /// wait for mergeStep() (each cell's value is the same either way; only
+  /// when its node merges differs); merges still queued from an earlier
+  /// call are done first.
+  MaintainResult maintain(MergeTiming merges = MergeTiming::kNow);
+  /// One kMergeSteps-th of the merges maintain(MergeTiming::kSpread) queued,
+  /// a part (AccumulatingOcTree::kPartDepth node) at a time, so that no
+  /// update waits for a whole map's merges and their frees. Nothing when
+  /// none are queued.
+  MaintainResult mergeStep();
+  /// True while merges wait for mergeStep().
+  bool mergesQueued() const { return !queued_merges_.empty(); }
   /// True once after maintain() moved tiles to the store or merged leaves: their memory is
   /// free, but the allocator keeps it from the system until trimHeap().
   bool takeFreedMemory();
@@ -114,6 +133,16 @@ class MissionMap {
   std::unordered_set<uint64_t> unmerged_;     ///< live tiles changed since maintain() merged their leaves
   bool all_unpublished_ = true;               ///< the next takeChangedTiles() gives the whole map
   bool freed_memory_ = false;                 ///< maintain() moved tiles or merged leaves since takeFreedMemory()
+  /// A tile whose merges maintain(MergeTiming::kSpread) queued.
+  struct QueuedMerge {
+    uint64_t tile = 0;                      ///< TileStore::pack
+    std::vector<octomap::OcTreeKey> parts;  ///< MapAccumulator::partsToMerge, merged up to next
+    size_t next = 0;
+    size_t merged = 0;  ///< nodes merged in the tile so far
+  };
+  std::deque<QueuedMerge> queued_merges_;  ///< in the order maintain() met the tiles
+  size_t parts_per_step_ = 0;              ///< a kMergeSteps-th of the queue's parts, at least 1
+  size_t spread_merged_ = 0;               ///< nodes the queue merged so far (takeFreedMemory() when it empties)
   /// The live map's kept box grown by kPruneSlack · max_extent_m; empty before the first update.
   Eigen::AlignedBox3d window() const;
   /// Moves the resident tile @p key to the store (written only if changed) and out of RAM.
@@ -122,6 +151,15 @@ class MissionMap {
   void collectDirtyTiles();
   /// MapAccumulator::mergeEqualLeaves for each tile of unmerged_.
   void mergeChangedTiles(MaintainResult* result);
+  /// Queues the tiles of unmerged_ for mergeStep().
+  void queueChangedTiles();
+  /// Merges the rest of the queue's tiles now.
+  void finishQueuedMerges(MaintainResult* result);
+  /// Merges the queue's next @p parts parts, and the tiles above the ones
+  /// whose parts are all merged. Returns how many nodes became leaves.
+  size_t mergeQueued(size_t parts);
+  /// Takes @p key out of the queue; true if it was there.
+  bool unqueue(uint64_t key);
 };
 
 }  // namespace stereo_occupancy
