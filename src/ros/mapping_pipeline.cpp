@@ -204,12 +204,17 @@ bool MapFusion::fuse(const OccupancyUpdate& msg, std::string* why, const std::st
   last_sensor_origin_ = Eigen::Vector3d(msg.sensor_origin.x, msg.sensor_origin.y, msg.sensor_origin.z);
   // Pruning follows the updates' time, so that a replay prunes where the flight did.
   if (last_prune_.isZero() || last_stamp_ < last_prune_) last_prune_ = last_stamp_;
+  // The merges of equal leaves (compress_map) are spread over the next
+  // updates: all at once, they and their frees held one update for ~10 ms.
   if ((last_stamp_ - last_prune_).toSec() > params_.prune_period_s) {
     const StageTimer timer(stage_times_, PathStage::kMaintenance);
-    const MaintainResult kept = mission_.maintain();
+    const MaintainResult kept = mission_.maintain(MergeTiming::kSpread);
     counters_.leaves_pruned += kept.leaves_dropped;
     counters_.tiles_stored += kept.tiles_stored;
     last_prune_ = last_stamp_;
+  } else if (mission_.mergesQueued()) {
+    const StageTimer timer(stage_times_, PathStage::kMaintenance);
+    mission_.mergeStep();
   }
   return true;
 }

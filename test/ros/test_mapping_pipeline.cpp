@@ -283,6 +283,45 @@ TEST_F(PipelineTest, UpdatesThatNeverArriveAreCounted) {
   EXPECT_EQ(fusion.counters().lost, 2u);
 }
 
+// compress_map's merges come after the maintain, over the next
+// MissionMap::kMergeSteps updates, not in the update that maintains: the
+// map then has fewer leaves than one that never merges, and every cell its value.
+TEST_F(PipelineTest, TheMergesAreSpreadOverTheNextUpdates) {
+  OctomapAccumulatorParameters params;
+  params.prune_period_s = 5.0;  // one maintain in this test
+  OctomapAccumulatorParameters plain_params = params;
+  plain_params.map.compress_map = false;
+  FrameMapping mapping{DisparityMapperParameters()};
+  MapFusion fusion{params}, plain{plain_params};
+  std::string why;
+  FrameResult result;
+  const int maintaining = 21;  // the first update more than 5 s after the first
+  for (int k = 0; k <= maintaining + static_cast<int>(MissionMap::kMergeSteps); ++k) {
+    const double t = 10.0 + 0.25 * k;
+    const OccupancyUpdatePtr update = mapping.map(frame(t), nullptr, tf_, ros::Time(t), &result);
+    ASSERT_TRUE(update) << result.why;
+    ASSERT_TRUE(fusion.fuse(*update, &why)) << why;
+    ASSERT_TRUE(plain.fuse(*update, &why)) << why;
+    const size_t leaves = fusion.map().tree().getNumLeafNodes();
+    if (k <= maintaining) EXPECT_EQ(leaves, plain.map().tree().getNumLeafNodes()) << "update " << k;
+    // kMergeSteps steps at most (fewer when the parts do not divide evenly).
+    const int steps_done = k - maintaining;
+    if (k < maintaining) EXPECT_FALSE(fusion.mission().mergesQueued()) << "update " << k;
+    if (steps_done >= 0 && steps_done < static_cast<int>(MissionMap::kMergeSteps) / 2)
+      EXPECT_TRUE(fusion.mission().mergesQueued()) << "update " << k;
+  }
+  EXPECT_FALSE(fusion.mission().mergesQueued());
+  const octomap::OcTree& merged = fusion.map().tree();
+  EXPECT_LT(merged.getNumLeafNodes(), plain.map().tree().getNumLeafNodes() * 3 / 4);
+  size_t cells = 0;
+  for (auto it = plain.map().tree().begin_leafs(), end = plain.map().tree().end_leafs(); it != end; ++it, ++cells) {
+    const octomap::OcTreeNode* n = merged.search(it.getKey());
+    ASSERT_NE(n, nullptr);
+    ASSERT_EQ(n->getLogOdds(), it->getLogOdds());
+  }
+  EXPECT_GT(cells, 10000u);
+}
+
 // Pruning follows the updates' stamps, so that a replay prunes where the flight did.
 TEST_F(PipelineTest, TheMapIsPrunedOnTheUpdatesClock) {
   OctomapAccumulatorParameters params;
