@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <array>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -141,7 +142,8 @@ class AccumulatingOcTree : public octomap::OcTree {
   /// With @p deepest, only nodes at depths [depth, deepest] merge (the
   /// ones below were merged already: their parts, one at a time).
   /// Returns how many nodes became leaves.
-  size_t pruneBelow(const octomap::OcTreeKey& key, unsigned depth, unsigned deepest = 15);
+  size_t pruneBelow(const octomap::OcTreeKey& key, unsigned depth,
+                    unsigned deepest = std::numeric_limits<unsigned>::max());
 
   /// The keys of the nodes at @p part_depth below the node of @p key at
   /// @p depth that have children (the ones pruneBelow() could merge), in

@@ -36,7 +36,7 @@ struct MapAccumulatorConfig {
   /// before anything is allocated. As DrawingConfig::max_grid_cells.
   uint64_t max_update_cells = uint64_t{64} << 20;
   /// Merge eight sibling leaves of one value into their parent in the tiles
-  /// that changed, at each MissionMap::maintain() (octomap_server's
+  /// that changed, at each MissionMap::maintain() or over the steps after it (octomap_server's
   /// compress_map): about half the memory and a quarter of the disk, each
   /// cell's value the same; the fusion costs more (docs/mission.md).
   bool compress_map = true;
@@ -205,7 +205,10 @@ class MapAccumulator {
   /// between the parts and the tile. The steps in turn, with nothing fused
   /// between them, give mergeEqualLeaves()' tree.
   std::vector<octomap::OcTreeKey> partsToMerge(const TileIndex& tile) const;
-  /// Merges the equal leaves below one part of partsToMerge(). Returns how many nodes became leaves.
+  /// Merges the equal leaves below one part of partsToMerge(); a part gone
+  /// since (a prune, a dropped or cleared tile) merges nothing, so a queue
+  /// of parts stays valid whatever happens to the tree. Returns how many
+  /// nodes became leaves.
   size_t mergePart(const octomap::OcTreeKey& part);
   /// Merges @p tile's nodes above its parts (depths kTileDepth to kPartDepth - 1).
   size_t mergeTileAbove(const TileIndex& tile);

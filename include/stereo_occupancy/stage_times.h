@@ -22,7 +22,7 @@ enum class PathStage : int {
   kEncoding,         ///< the grid's known cells into runs (GridUpdate)
   kMessage,          ///< the runs into an OccupancyUpdate message
   kFusion,           ///< the update into the OcTree (checks, view, MapAccumulator::integrate)
-  kMaintenance,      ///< pruning and the mission's tiles, every prune_period_s
+  kMaintenance,      ///< pruning and the mission's tiles every prune_period_s; compress_map's merge steps
   kCount,
 };
 

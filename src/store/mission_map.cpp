@@ -65,11 +65,14 @@ MaintainResult MissionMap::maintain(MergeTiming merges) {
     }
   }
   finishQueuedMerges(&result);
+  // Merges of an earlier queue's steps, not yet counted for the trim.
+  const bool steps_merged = spread_merged_ > 0;
+  spread_merged_ = 0;
   if (merges == MergeTiming::kSpread && live_.config().compress_map)
     queueChangedTiles();
   else
     mergeChangedTiles(&result);
-  freed_memory_ = freed_memory_ || (store_ && (result.tiles_stored > 0 || result.nodes_merged > 0));
+  freed_memory_ = freed_memory_ || (store_ && (result.tiles_stored > 0 || result.nodes_merged > 0 || steps_merged));
   return result;
 }
 
@@ -84,14 +87,16 @@ void MissionMap::queueChangedTiles() {
   }
   unmerged_.clear();
   parts_per_step_ = std::max<size_t>(1, (parts + kMergeSteps - 1) / kMergeSteps);
-  spread_merged_ = 0;
 }
 
 MaintainResult MissionMap::mergeStep() {
   MaintainResult result;
   result.nodes_merged = mergeQueued(parts_per_step_);
   spread_merged_ += result.nodes_merged;
-  if (queued_merges_.empty() && spread_merged_ > 0 && store_) freed_memory_ = true;
+  if (queued_merges_.empty()) {  // the last step: one trim for the whole queue
+    freed_memory_ = freed_memory_ || (store_ && spread_merged_ > 0);
+    spread_merged_ = 0;
+  }
   return result;
 }
 
@@ -103,20 +108,22 @@ size_t MissionMap::mergeQueued(size_t parts) {
   size_t merged = 0;
   while (!queued_merges_.empty()) {
     QueuedMerge& q = queued_merges_.front();
-    for (; q.next < q.parts.size() && parts > 0; ++q.next, --parts) {
-      const size_t n = live_.mergePart(q.parts[q.next]);
-      q.merged += n;
-      merged += n;
-    }
-    if (q.next < q.parts.size()) break;  // the budget is spent
-    const size_t above = live_.mergeTileAbove(TileStore::unpack(q.tile));
-    q.merged += above;
-    merged += above;
-    if (q.merged > 0) unpublished_.insert(q.tile);  // the outputs encode the tile's new leaves
+    size_t n = 0;
+    for (; q.next < q.parts.size() && parts > 0; ++q.next, --parts) n += live_.mergePart(q.parts[q.next]);
+    const bool done = q.next == q.parts.size();
+    if (done) n += live_.mergeTileAbove(TileStore::unpack(q.tile));
+    if (n > 0) tileMerged(q.tile);
+    merged += n;
+    if (!done) break;  // the budget is spent
     queued_merges_.pop_front();
     if (parts == 0) break;
   }
   return merged;
+}
+
+void MissionMap::tileMerged(uint64_t key) {
+  unpublished_.insert(key);          // the outputs encode the tile's new leaves
+  if (store_) unsaved_.insert(key);  // a checkpoint may have stored it before the merges
 }
 
 bool MissionMap::unqueue(uint64_t key) {
@@ -136,13 +143,15 @@ Eigen::AlignedBox3d MissionMap::window() const {
 
 void MissionMap::storeTile(uint64_t key, MaintainResult* result) {
   const TileIndex tile = TileStore::unpack(key);
-  // Unchanged since the store had it: its copy is current.
-  const bool queued = unqueue(key);  // its merges are done here, in one go
-  if (unsaved_.erase(key)) {
-    if ((unmerged_.erase(key) || queued) && live_.config().compress_map)
-      result->nodes_merged += live_.mergeEqualLeaves(tile);
-    store_->put(tile, live_.tileLeaves(tile));
+  const bool queued = unqueue(key);  // the merges still queued for it are done here, in one go
+  bool changed = unsaved_.erase(key) > 0;
+  if ((unmerged_.erase(key) > 0 || queued) && live_.config().compress_map) {
+    const size_t merged = live_.mergeEqualLeaves(tile);
+    result->nodes_merged += merged;
+    changed = changed || merged > 0;
   }
+  // Unchanged since the store had it: its copy is current.
+  if (changed) store_->put(tile, live_.tileLeaves(tile));
   if (live_.dropTile(tile) > 0) ++result->tiles_stored;
   resident_.erase(key);
   unmerged_.erase(key);
@@ -156,7 +165,7 @@ void MissionMap::mergeChangedTiles(MaintainResult* result) {
   }
   for (uint64_t key : unmerged_) {
     const size_t merged = live_.mergeEqualLeaves(TileStore::unpack(key));
-    if (merged > 0) unpublished_.insert(key);  // the outputs encode the tile's new leaves
+    if (merged > 0) tileMerged(key);
     result->nodes_merged += merged;
   }
   unmerged_.clear();
@@ -237,6 +246,7 @@ void MissionMap::reset() {
   live_.reset();
   unmerged_.clear();
   queued_merges_.clear();
+  spread_merged_ = 0;
   resident_.clear();
   unsaved_.clear();
   unpublished_.clear();
@@ -248,6 +258,7 @@ void MissionMap::load(const std::string& path) {
   live_.load(path);
   unmerged_.clear();
   queued_merges_.clear();
+  spread_merged_ = 0;
   resident_.clear();
   unsaved_.clear();
   unpublished_.clear();

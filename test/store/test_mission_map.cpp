@@ -428,6 +428,47 @@ TEST(MissionMap, QueuedTileGoesToTheStoreMerged) {
   EXPECT_EQ(leaves[0].depth, 13u);
 }
 
+// Merges that come after a checkpoint reach the store: the tiles stored
+// when the vehicle leaves are the tiles of one merge. Each step's merged
+// tile goes to the outputs; the last step asks for a heap trim; a reset
+// empties the queue.
+TEST(MissionMap, SpreadMergesAfterACheckpointReachTheStoreAndTheOutputs) {
+  MapAccumulatorConfig windowed;
+  windowed.max_extent_m = 40.0;
+  MissionMap now{MapAccumulatorConfig()}, mission(windowed);
+  mission.attachStore(std::make_shared<TileStore>(freshDatabase("spread_checkpoint"), kRes));
+  flyOverTwoTiles(&now);
+  flyOverTwoTiles(&mission);
+  now.maintain();
+  bool whole = false;
+  mission.takeChangedTiles(false, &whole);  // the first: the whole map
+  mission.maintain(MergeTiming::kSpread);
+  mission.takeChangedTiles(false, &whole);  // the tiles the updates changed
+  EXPECT_FALSE(mission.takeFreedMemory());
+  ASSERT_GT(mission.mergeStep().nodes_merged, 0u);
+  const std::vector<TileContent> changed = mission.takeChangedTiles(false, &whole);
+  ASSERT_EQ(changed.size(), 1u) << "the tile the first step merged in";
+  EXPECT_EQ(changed[0].leaves.size(), mission.live().tileLeaves(changed[0].tile).size());
+  EXPECT_EQ(mission.checkpoint(), 2u);
+  while (mission.mergesQueued()) {
+    EXPECT_FALSE(mission.takeFreedMemory()) << "one trim, after the last step";
+    mission.mergeStep();
+  }
+  EXPECT_TRUE(mission.takeFreedMemory());
+  for (int i = 0; i < 2 * static_cast<int>(MapAccumulator::kPruneOrigins); ++i)
+    ASSERT_TRUE(mission.integrate(singleCell(Eigen::Vector3i(4000 + i % 40, i % 7, i % 3), 0.4f)));
+  EXPECT_EQ(mission.maintain(MergeTiming::kSpread).tiles_stored, 2u);
+  ASSERT_TRUE(mission.store()->flush());
+  for (int t = 0; t < 2; ++t) {
+    std::vector<MapAccumulator::Leaf> stored;
+    ASSERT_TRUE(mission.store()->get(MapAccumulator::TileIndex(t, 0, 0), &stored));
+    EXPECT_EQ(stored.size(), now.live().tileLeaves(MapAccumulator::TileIndex(t, 0, 0)).size()) << "tile " << t;
+  }
+  ASSERT_TRUE(mission.mergesQueued()) << "the far cells' tile";
+  mission.reset();
+  EXPECT_FALSE(mission.mergesQueued());
+}
+
 // A tile's leaves after merging are its own: octomap's box iterator also
 // hands out the merged leaves of the tile next to it, which a tile row must
 // not carry (the whole mission's files were unreadable with them).

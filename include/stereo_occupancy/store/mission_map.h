@@ -72,8 +72,10 @@ class MissionMap {
   MaintainResult mergeStep();
   /// True while merges wait for mergeStep().
   bool mergesQueued() const { return !queued_merges_.empty(); }
-  /// True once after maintain() moved tiles to the store or merged leaves: their memory is
-  /// free, but the allocator keeps it from the system until trimHeap().
+  /// True once after maintain() moved tiles to the store or merged leaves,
+  /// or after the last mergeStep() of a queue that merged some (with a
+  /// store): their memory is free, but the allocator keeps it from the
+  /// system until trimHeap().
   bool takeFreedMemory();
   /// Gives the allocator's free pages back to the system (glibc's
   /// malloc_trim). It walks the heap: call it outside the lock that
@@ -132,24 +134,23 @@ class MissionMap {
   std::unordered_set<uint64_t> unpublished_;  ///< tiles changed or gone since takeChangedTiles()
   std::unordered_set<uint64_t> unmerged_;     ///< live tiles changed since maintain() merged their leaves
   bool all_unpublished_ = true;               ///< the next takeChangedTiles() gives the whole map
-  bool freed_memory_ = false;                 ///< maintain() moved tiles or merged leaves since takeFreedMemory()
+  bool freed_memory_ = false;                 ///< see takeFreedMemory()
   /// A tile whose merges maintain(MergeTiming::kSpread) queued.
   struct QueuedMerge {
     uint64_t tile = 0;                      ///< TileStore::pack
     std::vector<octomap::OcTreeKey> parts;  ///< MapAccumulator::partsToMerge, merged up to next
     size_t next = 0;
-    size_t merged = 0;  ///< nodes merged in the tile so far
   };
   std::deque<QueuedMerge> queued_merges_;  ///< in the order maintain() met the tiles
   size_t parts_per_step_ = 0;              ///< a kMergeSteps-th of the queue's parts, at least 1
-  size_t spread_merged_ = 0;               ///< nodes the queue merged so far (takeFreedMemory() when it empties)
+  size_t spread_merged_ = 0;               ///< nodes the queue's steps merged so far (freed_memory_ when it empties)
   /// The live map's kept box grown by kPruneSlack · max_extent_m; empty before the first update.
   Eigen::AlignedBox3d window() const;
   /// Moves the resident tile @p key to the store (written only if changed) and out of RAM.
   void storeTile(uint64_t key, MaintainResult* result);
   /// Moves the live map's dirty tiles to unsaved_ (with a store), unpublished_ and unmerged_.
   void collectDirtyTiles();
-  /// MapAccumulator::mergeEqualLeaves for each tile of unmerged_.
+  /// MapAccumulator::mergeEqualLeaves for each tile of unmerged_ (tileMerged()).
   void mergeChangedTiles(MaintainResult* result);
   /// Queues the tiles of unmerged_ for mergeStep().
   void queueChangedTiles();
@@ -158,6 +159,8 @@ class MissionMap {
   /// Merges the queue's next @p parts parts, and the tiles above the ones
   /// whose parts are all merged. Returns how many nodes became leaves.
   size_t mergeQueued(size_t parts);
+  /// After @p key's leaves merged: to the outputs, and to the store at the next checkpoint.
+  void tileMerged(uint64_t key);
   /// Takes @p key out of the queue; true if it was there.
   bool unqueue(uint64_t key);
 };
