@@ -94,6 +94,17 @@ class AccumulatingOcTree : public octomap::OcTree {
     /// The log-odds update of @p leaf (of @p key; @p created: new), unless it
     /// is clamped already, recording its class change.
     void updateLeaf(const octomap::OcTreeKey& key, octomap::OcTreeNode* leaf, float log_odds, bool created);
+    /// OccupancyOcTreeBase::updateNodeLogOdds() with the same operations,
+    /// inline: it is virtual and calls OcTreeNode::addValue() out of line,
+    /// two calls for every cell of every update.
+    void addLogOdds(octomap::OcTreeNode* node, float update) const {
+      node->setLogOdds(node->getLogOdds() + update);
+      if (node->getLogOdds() < tree_->clamping_thres_min) {
+        node->setLogOdds(tree_->clamping_thres_min);
+        return;
+      }
+      if (node->getLogOdds() > tree_->clamping_thres_max) node->setLogOdds(tree_->clamping_thres_max);
+    }
     /// updateLeaf()'s update when recording.
     void updateRecording(const octomap::OcTreeKey& key, octomap::OcTreeNode* node, float log_odds, bool created);
 
@@ -230,14 +241,14 @@ inline void AccumulatingOcTree::LeafUpdater::updateLeaf(const octomap::OcTreeKey
     updateRecording(key, leaf, log_odds, created);
     return;
   }
-  tree_->updateNodeLogOdds(leaf, log_odds);
+  addLogOdds(leaf, log_odds);
 }
 
 inline void AccumulatingOcTree::LeafUpdater::updateRecording(const octomap::OcTreeKey& key, octomap::OcTreeNode* node,
                                                              float log_odds, bool created) {
   // A created leaf was unknown; an expanded pruned leaf's cell holds its value already.
   const CellClass before = created ? CellClass::kUnknown : classOfLogOdds(node->getLogOdds(), occupied_log_odds_);
-  tree_->updateNodeLogOdds(node, log_odds);
+  addLogOdds(node, log_odds);
   const CellClass after = classOfLogOdds(node->getLogOdds(), occupied_log_odds_);
   if (after == before) return;
   if (changes_->size() >= max_changes_) {
