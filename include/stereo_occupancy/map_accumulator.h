@@ -226,6 +226,9 @@ class MapAccumulator {
   std::vector<std::string> save(const std::string& directory, const std::string& base_name) const;
 
  private:
+  /// AccumulatingOcTree::pruneBelow() over @p tile's node, its depths
+  /// kTileDepth to @p deepest (mergeEqualLeaves(), mergeTileAbove()).
+  size_t mergeTileDownTo(const TileIndex& tile, unsigned deepest);
   struct Fusion;  // the workers' parts of an update, and the workers
   void applyThresholds();
   /// integrate()'s walk through the update's sibling blocks on this thread.

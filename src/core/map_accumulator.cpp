@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <unordered_map>
 
@@ -579,12 +580,7 @@ std::vector<MapAccumulator::Leaf> MapAccumulator::tileLeaves(const TileIndex& ti
 }
 
 size_t MapAccumulator::mergeEqualLeaves(const TileIndex& tile) {
-  if (!tileInKeyRange(tile)) return 0;
-  octomap::OcTreeKey lo, hi;
-  tileKeys(tile, static_cast<int>(tree_->coordToKey(0.0)), &lo, &hi);
-  const size_t merged = tree_->pruneBelow(lo, kTileDepth);
-  inner_stale_ = inner_stale_ || merged > 0;
-  return merged;
+  return mergeTileDownTo(tile, std::numeric_limits<unsigned>::max());
 }
 
 std::vector<octomap::OcTreeKey> MapAccumulator::partsToMerge(const TileIndex& tile) const {
@@ -601,10 +597,14 @@ size_t MapAccumulator::mergePart(const octomap::OcTreeKey& part) {
 }
 
 size_t MapAccumulator::mergeTileAbove(const TileIndex& tile) {
+  return mergeTileDownTo(tile, AccumulatingOcTree::kPartDepth - 1);
+}
+
+size_t MapAccumulator::mergeTileDownTo(const TileIndex& tile, unsigned deepest) {
   if (!tileInKeyRange(tile)) return 0;
   octomap::OcTreeKey lo, hi;
   tileKeys(tile, static_cast<int>(tree_->coordToKey(0.0)), &lo, &hi);
-  const size_t merged = tree_->pruneBelow(lo, kTileDepth, AccumulatingOcTree::kPartDepth - 1);
+  const size_t merged = tree_->pruneBelow(lo, kTileDepth, deepest);
   inner_stale_ = inner_stale_ || merged > 0;
   return merged;
 }
