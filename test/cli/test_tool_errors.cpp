@@ -109,7 +109,9 @@ TEST(ToolErrors, BenchmarksAndFigures) {
       "performance",
       {performance + " --repeat 0", performance + " --only warp_drive", performance + " --scenario mars",
        performance + " --scenario posts --frame 100000", performance + " --flight mars", performance + " --pace-ms 100",
-       performance + " --flight posts --pace-ms -1", performance + " --frobnicate"},
+       performance + " --flight posts --pace-ms -1", performance + " --frobnicate",
+       performance + " --flight posts --thread-rounds 2", performance + " --stages --scenario posts --thread-rounds 2",
+       performance + " --stages --flight posts --thread-rounds 0"},
       2);
   expectError("make_figures", {figures + " a b", figures + " --frobnicate"}, 2);
   expectError("make_figures", {figures + " /nonexistent/dir"}, 1);

@@ -175,6 +175,93 @@ int wholePath(const so::FlightScenario& scenario, const std::vector<size_t>& fra
   return fused == images.size() ? 0 : 1;
 }
 
+/// One pass of the whole path over a flight's images on a fresh pipeline.
+struct PathPass {
+  std::vector<double> whole_ms;  ///< per frame
+  size_t fused = 0;              ///< images fused
+  std::string map_bytes;         ///< the map at the end, as .ot data (OcTree::writeData)
+};
+
+/// WholePath on @p threads threads over @p disparities (frame k of
+/// @p scenario each), the messages made first as in wholePath().
+PathPass wholePathPass(const so::FlightScenario& scenario, const std::vector<cv::Mat>& disparities, int threads) {
+  so::tools::WholePath path(threads);
+  std::vector<stereo_msgs::DisparityImageConstPtr> images;
+  for (size_t k = 0; k < disparities.size(); ++k) images.push_back(path.prepare(scenario, k, disparities[k], k));
+  PathPass pass;
+  for (const auto& image : images) {
+    const auto t0 = Clock::now();
+    pass.fused += path.run(image, nullptr);
+    pass.whole_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+  }
+  std::ostringstream data;
+  path.fusion().map().tree().writeData(data);
+  pass.map_bytes = data.str();
+  return pass;
+}
+
+/// Issue 48's two threads against one, with this machine's own ceiling in
+/// the same minutes: @p rounds rounds of the whole path over flight
+/// @p flight on one thread, on two, and two one-thread passes at once (two
+/// copies of the same work, one per core). A noisy VM's speed drifts
+/// between runs; within a round the three are seconds apart.
+int threadRounds(const std::string& flight, int rounds) {
+  const so::FlightScenario scenario = so::tools::scenarioNamed(flight);
+  std::vector<cv::Mat> disparities;
+  for (size_t k = 0; k < scenario.T_W_B.size(); ++k) disparities.push_back(so::renderStereoFrame(scenario, k, 1));
+  std::cout << "Flight '" << flight << "', " << disparities.size()
+            << " frames: the whole path as the nodelets run it (FrameMapping, MapFusion, the defaults), each pass "
+               "into a new map; per round one thread, two threads, then two one-thread passes at once. Mean per "
+               "frame [ms]. Ceiling: what two cores give over one on two copies of the same work, 2 x one ÷ a "
+               "copy's.\n\n"
+               "| round | one thread | two threads | two ÷ one | a copy, two at once | ceiling |\n"
+               "|---:|---:|---:|---:|---:|---:|\n";
+  std::vector<double> speedups, ceilings, one_means, two_means, copy_means;
+  bool same_maps = true, all_fused = true;
+  for (int r = 0; r < rounds; ++r) {
+    const PathPass one = wholePathPass(scenario, disparities, 1);
+    const PathPass two = wholePathPass(scenario, disparities, 2);
+    PathPass copy_a, copy_b;
+    std::thread other([&] { copy_b = wholePathPass(scenario, disparities, 1); });
+    copy_a = wholePathPass(scenario, disparities, 1);
+    other.join();
+    const double one_ms = so::TimeStatistics::of(one.whole_ms).mean_ms;
+    const double two_ms = so::TimeStatistics::of(two.whole_ms).mean_ms;
+    const double copy_ms =
+        0.5 * (so::TimeStatistics::of(copy_a.whole_ms).mean_ms + so::TimeStatistics::of(copy_b.whole_ms).mean_ms);
+    one_means.push_back(one_ms);
+    two_means.push_back(two_ms);
+    copy_means.push_back(copy_ms);
+    speedups.push_back(one_ms / two_ms);
+    ceilings.push_back(2.0 * one_ms / copy_ms);
+    same_maps = same_maps && two.map_bytes == one.map_bytes && copy_a.map_bytes == one.map_bytes &&
+                copy_b.map_bytes == one.map_bytes;
+    for (const PathPass* pass :
+         {&one, &two, static_cast<const PathPass*>(&copy_a), static_cast<const PathPass*>(&copy_b)})
+      all_fused = all_fused && pass->fused == disparities.size();
+    std::cout << std::fixed << std::setprecision(2) << "| " << r + 1 << " | " << one_ms << " | " << two_ms << " | "
+              << speedups.back() << "x | " << copy_ms << " | " << ceilings.back() << "x |" << std::endl;
+  }
+  auto range = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    std::ostringstream text;
+    text << std::fixed << std::setprecision(2) << v[v.size() / 2] << "x (" << v.front() << "-" << v.back() << ")";
+    return text.str();
+  };
+  auto median = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
+  const double one_ms = median(one_means), two_ms = median(two_means), copy_ms = median(copy_means);
+  std::cout << "\nTwo threads ÷ one, median (min-max) of the rounds: " << range(speedups)
+            << "; the ceiling: " << range(ceilings) << ".\nThe rounds' medians: one thread " << std::setprecision(2)
+            << one_ms << " ms, two threads " << two_ms << " ms (" << one_ms / two_ms << "x), a copy two at once "
+            << copy_ms << " ms (ceiling " << 2.0 * one_ms / copy_ms
+            << "x).\nThe maps of every pass: " << (same_maps ? "the same .ot bytes" : "DIFFERENT .ot bytes") << "; "
+            << (all_fused ? "every image fused" : "an image was NOT fused") << "." << std::endl;
+  return same_maps && all_fused ? 0 : 1;
+}
+
 const char* kStages =
     "line, line_pyramid, raytrace, raytrace_pyramid, line_pyramid_bounded, raytrace_pyramid_bounded, default, blur, "
     "encode, fusion, octomap";
@@ -185,6 +272,7 @@ int run(int argc, char** argv) {
   long frame = 0, pace_ms = 0;
   int threads = 1;
   bool spans = true, stages = false;
+  int thread_rounds = 0;        // --thread-rounds: one thread against two, with the ceiling
   bool record_changes = false;  // the fusion records the cells whose class it changed (the distance field's feed)
   std::map<std::string, double> model_values;  // the default stage's sensor model, by name
   for (int i = 1; i < argc; ++i) {
@@ -209,37 +297,49 @@ int run(int argc, char** argv) {
       spans = false;
     } else if (a == "--stages") {
       stages = true;
+    } else if (a == "--thread-rounds") {
+      thread_rounds = static_cast<int>(so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 1, 1000));
     } else if (a == "--model") {
       so::tools::addNameValue(argc, argv, &i, &model_values);
     } else if (a == "--frame") {
       frame = so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 0, 1000000);
     } else if (a == "--help") {
-      std::cout << "usage: performance [--repeat N] [--only STAGE] [--scenario NAME [--frame K]] | --flight NAME "
-                   "[--pace-ms MS]; either with [--threads N]; [--model NAME=VALUE]... [--no-spans] "
-                   "[--record-changes] | --stages (--scenario NAME [--frame K] | --flight NAME) [--threads N]\n"
-                   "Times the mapper's stages on the Table I frame (or frame K of a simulated flight, with its "
-                   "stereo effects, seed 1) at 0.25 m (median and min-max of N runs, default 21) and OctoMap's "
-                   "insertPointCloud on the same frame.\n"
-                   "--flight NAME: the core of the mapper's path, and the fusion of its update into the flight's "
-                   "map, on every frame of a simulated flight, with their mean, median, p99 and maximum; "
-                   "--pace-ms MS sleeps MS before each frame, as between a camera's images.\n"
-                   "--threads N: draw, blur and fuse on N threads (default 1).\n"
-                   "--model NAME=VALUE: a sensor model parameter of the default stage and of the flight's "
-                   "line_pyramid_bounded row (e.g. gap_guard_cells=1), repeatable.\n"
-                   "--record-changes: the fusion stages record the cells whose class they change, as for the "
-                   "distance field (MapAccumulator::recordClassChanges).\n"
-                   "--no-spans: the default descends into the blocks it draws as spans (the form before them).\n"
-                   "--stages: the whole path as the nodelets run it (FrameMapping, MapFusion, the defaults), "
-                   "image in to map fused, stage by stage, on frame K repeated N times or on every frame of the "
-                   "flight.\n"
-                   "STAGE: "
-                << kStages << "\n";
+      std::cout
+          << "usage: performance [--repeat N] [--only STAGE] [--scenario NAME [--frame K]] | --flight NAME "
+             "[--pace-ms MS]; either with [--threads N]; [--model NAME=VALUE]... [--no-spans] "
+             "[--record-changes] | --stages (--scenario NAME [--frame K] | --flight NAME) [--threads N] | --stages "
+             "--flight NAME --thread-rounds R\n"
+             "Times the mapper's stages on the Table I frame (or frame K of a simulated flight, with its "
+             "stereo effects, seed 1) at 0.25 m (median and min-max of N runs, default 21) and OctoMap's "
+             "insertPointCloud on the same frame.\n"
+             "--flight NAME: the core of the mapper's path, and the fusion of its update into the flight's "
+             "map, on every frame of a simulated flight, with their mean, median, p99 and maximum; "
+             "--pace-ms MS sleeps MS before each frame, as between a camera's images.\n"
+             "--threads N: draw, blur and fuse on N threads (default 1).\n"
+             "--model NAME=VALUE: a sensor model parameter of the default stage and of the flight's "
+             "line_pyramid_bounded row (e.g. gap_guard_cells=1), repeatable.\n"
+             "--record-changes: the fusion stages record the cells whose class they change, as for the "
+             "distance field (MapAccumulator::recordClassChanges).\n"
+             "--no-spans: the default descends into the blocks it draws as spans (the form before them).\n"
+             "--stages: the whole path as the nodelets run it (FrameMapping, MapFusion, the defaults), "
+             "image in to map fused, stage by stage, on frame K repeated N times or on every frame of the "
+             "flight.\n"
+             "--thread-rounds R (with --stages --flight NAME): R rounds of the whole path over the flight on "
+             "one thread, on two, and two one-thread passes at once (the machine's ceiling for two cores), "
+             "each into a new map; prints each round's means, two threads ÷ one and the ceiling, and whether "
+             "every pass made the same map (exit 1 if not).\n"
+             "STAGE: "
+          << kStages << "\n";
       return 0;
     } else {
       throw so::tools::UsageError("unknown option '" + a + "'");
     }
   }
   if (pace_ms > 0 && flight.empty()) throw so::tools::UsageError("--pace-ms needs --flight");
+  if (thread_rounds > 0) {
+    if (!stages || flight.empty()) throw so::tools::UsageError("--thread-rounds needs --stages --flight NAME");
+    return threadRounds(flight, thread_rounds);
+  }
   if (stages) {
     if (flight.empty() == scenario_name.empty())
       throw so::tools::UsageError("--stages needs --scenario NAME or --flight NAME");
