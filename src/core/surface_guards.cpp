@@ -38,6 +38,23 @@ struct Guard {
   Eigen::Vector3d grid_camera = Eigen::Vector3d::Zero();  ///< the camera centre in the grid's cells
 };
 
+/// The first of @p flags [b, last) that is set, or last. Most flags are 0:
+/// eight at a time.
+size_t nextSetFlag(const uint8_t* flags, size_t b, size_t last) {
+  for (; b < last; ++b) {
+    if (b % 8 == 0 && b + 8 <= last) {
+      uint64_t eight;
+      std::memcpy(&eight, flags + b, sizeof eight);
+      if (eight == 0) {
+        b += 7;
+        continue;
+      }
+    }
+    if (flags[b]) return b;
+  }
+  return last;
+}
+
 /// True if cell @p f lies in front of cell @p hit as seen from @p grid_camera:
 /// at least half a cell nearer along the ray through the hit's centre (the
 /// free space its own measurement and the views of it clear), not beside it.
@@ -52,16 +69,25 @@ class GuardPass {
  public:
   explicit GuardPass(LocalGrid* grid)
       : grid_(*grid), data_(grid->data()), cells_(grid->numCells()), size_(grid->size()) {}
-  /// The first pass, in slabs of z on @p pool's workers; returns the cells
-  /// it marked. @p occupied_blocks as for applySurfaceGuards().
+  /// The first pass, in slabs of z or y on @p pool's workers; returns the
+  /// cells it marked. @p occupied_blocks as for applySurfaceGuards().
   size_t guardNearOccupied(const Guard& guard, WorkerPool* pool, const uint8_t* occupied_blocks);
   /// The second pass: the zeros left become @p free_value, the marks 0;
   /// returns the zeros set free.
   size_t settleMarks(float free_value, WorkerPool* pool);
 
  private:
-  /// guardNearOccupied() for the occupied cells in the slabs [z_begin, z_end).
-  size_t guardSlabs(const Guard& guard, int z_begin, int z_end, const uint8_t* occupied_blocks);
+  /// guardNearOccupied() for the occupied cells in the slabs [begin, end)
+  /// of @p axis (2: z; 1: y, only with @p occupied_blocks).
+  size_t guardSlabs(const Guard& guard, int axis, int begin, int end, const uint8_t* occupied_blocks);
+  /// The axis whose slabs share the occupied blocks out best among chunks
+  /// of the thickness chunkSlabs() gives: 2 (z) unless y's largest chunk
+  /// holds fewer (a flat ground's hits lie in a few slabs of z).
+  int slabAxis(const uint8_t* occupied_blocks, int min_slabs, int wanted) const;
+  /// Slabs per chunk along an axis of @p size cells.
+  static int chunkSlabs(int size, int min_slabs, int wanted) {
+    return std::max(min_slabs, (size + wanted - 1) / wanted);
+  }
 
   const LocalGrid& grid_;
   float* data_;
@@ -79,22 +105,44 @@ size_t GuardPass::guardNearOccupied(const Guard& guard, WorkerPool* pool, const 
   // the grid and the count do not depend on the order.
   const int min_slabs = 2 * radius + 1;
   const int wanted = 2 * kGuardChunksPerWorker * static_cast<int>(workers);
-  const int chunk_slabs = std::max(min_slabs, (size_.z() + wanted - 1) / wanted);
-  const int chunks = (size_.z() + chunk_slabs - 1) / chunk_slabs;
-  if (workers == 1 || chunks < 2) return guardSlabs(guard, 0, size_.z(), occupied_blocks);
+  if (workers == 1) return guardSlabs(guard, 2, 0, size_.z(), occupied_blocks);
+  const int axis = slabAxis(occupied_blocks, min_slabs, wanted);
+  const int chunk_slabs = chunkSlabs(size_[axis], min_slabs, wanted);
+  const int chunks = (size_[axis] + chunk_slabs - 1) / chunk_slabs;
+  if (chunks < 2) return guardSlabs(guard, axis, 0, size_[axis], occupied_blocks);
   std::vector<size_t> marked(static_cast<size_t>(chunks), 0);
   for (int parity = 0; parity < 2; ++parity)
     pool->run(static_cast<size_t>(chunks - parity + 1) / 2, [&](size_t i, unsigned) {
       const int chunk = 2 * static_cast<int>(i) + parity;
-      const int z_begin = chunk * chunk_slabs;
-      marked[chunk] = guardSlabs(guard, z_begin, std::min(size_.z(), z_begin + chunk_slabs), occupied_blocks);
+      const int begin = chunk * chunk_slabs;
+      marked[chunk] = guardSlabs(guard, axis, begin, std::min(size_[axis], begin + chunk_slabs), occupied_blocks);
     });
   size_t total = 0;
   for (size_t n : marked) total += n;
   return total;
 }
 
-size_t GuardPass::guardSlabs(const Guard& guard, int z_begin, int z_end, const uint8_t* occupied_blocks) {
+int GuardPass::slabAxis(const uint8_t* occupied_blocks, int min_slabs, int wanted) const {
+  if (!occupied_blocks) return 2;  // the scan of every row goes by z
+  const int blocks_per_row = grid_.blocksPerRow();
+  const int z_slabs = chunkSlabs(size_.z(), min_slabs, wanted), y_slabs = chunkSlabs(size_.y(), min_slabs, wanted);
+  std::vector<size_t> per_z((size_.z() + z_slabs - 1) / z_slabs, 0), per_y((size_.y() + y_slabs - 1) / y_slabs, 0);
+  for (int z = 0; z < size_.z(); ++z)
+    for (int y = 0; y < size_.y(); ++y) {
+      const size_t first = (static_cast<size_t>(z) * size_.y() + y) * blocks_per_row, last = first + blocks_per_row;
+      size_t flagged = 0;
+      for (size_t b = nextSetFlag(occupied_blocks, first, last); b < last;
+           b = nextSetFlag(occupied_blocks, b + 1, last))
+        ++flagged;
+      per_z[z / z_slabs] += flagged;
+      per_y[y / y_slabs] += flagged;
+    }
+  const size_t largest_z = *std::max_element(per_z.begin(), per_z.end());
+  const size_t largest_y = *std::max_element(per_y.begin(), per_y.end());
+  return largest_y < largest_z && per_y.size() >= 2 ? 1 : 2;
+}
+
+size_t GuardPass::guardSlabs(const Guard& guard, int axis, int begin, int end, const uint8_t* occupied_blocks) {
   const int radius = std::max({guard.sky_radius, guard.gap_radius, guard.edge_radius});
   // The sky and edge guards' cells become 0 at once (nothing else reads
   // them); the gap's zeros near a hit are marked, so that settleMarks() can
@@ -152,25 +200,27 @@ size_t GuardPass::guardSlabs(const Guard& guard, int z_begin, int z_end, const u
     }
   };
   const int blocks_per_row = grid_.blocksPerRow();
-  if (occupied_blocks) {  // the drawer's flags: a few thousand of the grid's blocks
-    const size_t first = static_cast<size_t>(z_begin) * size_.y() * blocks_per_row;
-    const size_t last = static_cast<size_t>(z_end) * size_.y() * blocks_per_row;
-    for (size_t b = first; b < last; ++b) {
-      if (b % 8 == 0 && b + 8 <= last) {  // most flags are 0: eight at a time
-        uint64_t eight;
-        std::memcpy(&eight, occupied_blocks + b, sizeof eight);
-        if (eight == 0) {
-          b += 7;
-          continue;
-        }
-      }
-      if (!occupied_blocks[b]) continue;
+  // The flagged blocks of the rows [first, last) (a row: y + size.y · z).
+  auto markFlagged = [&](size_t first_row, size_t last_row) {
+    const size_t first = first_row * blocks_per_row, last = last_row * blocks_per_row;
+    for (size_t b = nextSetFlag(occupied_blocks, first, last); b < last;
+         b = nextSetFlag(occupied_blocks, b + 1, last)) {
       const size_t row = b / blocks_per_row;
       markBlock(static_cast<int>(b % blocks_per_row) * kInformationBlock, static_cast<int>(row % size_.y()),
                 static_cast<int>(row / size_.y()));
     }
+  };
+  if (occupied_blocks) {  // the drawer's flags: a few thousand of the grid's blocks
+    const size_t rows_y = static_cast<size_t>(size_.y());
+    if (axis == 2) {
+      markFlagged(static_cast<size_t>(begin) * rows_y, static_cast<size_t>(end) * rows_y);
+    } else {  // slabs of y: their rows in each slab of z
+      for (int z = 0; z < size_.z(); ++z)
+        markFlagged(static_cast<size_t>(z) * rows_y + begin, static_cast<size_t>(z) * rows_y + end);
+    }
     return marked;
   }
+  const int z_begin = begin, z_end = end;  // axis 2: the scan goes by z
   for (int z = z_begin; z < z_end; ++z)
     for (int y = 0; y < size_.y(); ++y) {
       const float* row = &data_[grid_.linearIndex(0, y, z)];

@@ -359,3 +359,34 @@ TEST(SurfaceGuards, EdgeGuardMatchesAPlainReference) {
       }
   }
 }
+
+// A flat ground's hits lie in one slab of z, so the pool's chunks go by
+// slabs of y there: the same grid and count as on one thread, for all
+// three guards (sky, gap, edge), with the blocks that hold hits flagged.
+TEST(SurfaceGuards, GuardsOnAFlatGroundOnWorkersMatchOneThread) {
+  const float free = -0.85f, sky = std::nextafter(free, -1.0f), hit = 0.9f;
+  const float kinds[] = {LocalGrid::kUnknown, sky, sky, free, 0.0f, 0.0f};
+  LocalGrid ground = randomGridWithRuns({70, 64, 20}, kinds, hit, 0.0, 3);  // no hits yet
+  std::mt19937 rng(5);
+  std::bernoulli_distribution hit_here(0.3);
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 70; ++x)
+      if (hit_here(rng)) ground.at(x, y, 6) = hit;  // the ground: z = 6 only
+  const std::vector<uint8_t> flags = hitBlockFlags(ground, hit);
+  for (int radius : {1, 2}) {
+    SurfaceGuards guards = skyAndGap(sky, radius, free, radius);
+    guards.edge_radius = radius;
+    guards.grid_camera = Eigen::Vector3d(35.0, -10.0, 15.0);  // above the ground, behind the grid
+    LocalGrid expected = ground;
+    const size_t freed = applySurfaceGuards(&expected, guards, nullptr, flags.data());
+    ASSERT_GT(freed, 0u);
+    ASSERT_NE(std::memcmp(expected.data(), ground.data(), ground.numCells() * sizeof(float)), 0);
+    for (unsigned threads : {2u, 3u}) {
+      WorkerPool pool(threads);
+      LocalGrid guarded = ground;
+      EXPECT_EQ(applySurfaceGuards(&guarded, guards, &pool, flags.data()), freed) << radius << " " << threads;
+      EXPECT_EQ(std::memcmp(guarded.data(), expected.data(), expected.numCells() * sizeof(float)), 0)
+          << radius << " " << threads;
+    }
+  }
+}
