@@ -20,8 +20,9 @@ namespace stereo_occupancy {
 /// (Chebyshev) of an occupied cell (log-odds > 0) to 0, no information;
 /// returns how many (none for @p value 0). With value = the sky's
 /// log-odds: a ray that measured no range says nothing next to what the
-/// image did measure. With a @p pool, slabs of z on its workers: the same
-/// grid and count. @p occupied_blocks as for applySurfaceGuards().
+/// image did measure. With a @p pool, slabs of z on its workers (or of y,
+/// with @p occupied_blocks, where they share the flagged blocks out better):
+/// the same grid and count. @p occupied_blocks as for applySurfaceGuards().
 size_t silenceNearOccupied(LocalGrid* grid, float value, int radius, WorkerPool* pool = nullptr,
                            const uint8_t* occupied_blocks = nullptr);
 

@@ -123,20 +123,17 @@ size_t GuardPass::guardNearOccupied(const Guard& guard, WorkerPool* pool, const 
 }
 
 int GuardPass::slabAxis(const uint8_t* occupied_blocks, int min_slabs, int wanted) const {
-  if (!occupied_blocks) return 2;  // the scan of every row goes by z
-  const int blocks_per_row = grid_.blocksPerRow();
+  if (!occupied_blocks || size_.y() <= 0 || size_.z() <= 0) return 2;  // the scan of every row goes by z
+  const size_t blocks_per_row = static_cast<size_t>(grid_.blocksPerRow()), rows_y = static_cast<size_t>(size_.y());
   const int z_slabs = chunkSlabs(size_.z(), min_slabs, wanted), y_slabs = chunkSlabs(size_.y(), min_slabs, wanted);
   std::vector<size_t> per_z((size_.z() + z_slabs - 1) / z_slabs, 0), per_y((size_.y() + y_slabs - 1) / y_slabs, 0);
-  for (int z = 0; z < size_.z(); ++z)
-    for (int y = 0; y < size_.y(); ++y) {
-      const size_t first = (static_cast<size_t>(z) * size_.y() + y) * blocks_per_row, last = first + blocks_per_row;
-      size_t flagged = 0;
-      for (size_t b = nextSetFlag(occupied_blocks, first, last); b < last;
-           b = nextSetFlag(occupied_blocks, b + 1, last))
-        ++flagged;
-      per_z[z / z_slabs] += flagged;
-      per_y[y / y_slabs] += flagged;
-    }
+  const size_t blocks = grid_.numBlocks();
+  for (size_t b = nextSetFlag(occupied_blocks, 0, blocks); b < blocks;
+       b = nextSetFlag(occupied_blocks, b + 1, blocks)) {
+    const size_t row = b / blocks_per_row;
+    ++per_z[row / rows_y / z_slabs];
+    ++per_y[row % rows_y / y_slabs];
+  }
   const size_t largest_z = *std::max_element(per_z.begin(), per_z.end());
   const size_t largest_y = *std::max_element(per_y.begin(), per_y.end());
   return largest_y < largest_z && per_y.size() >= 2 ? 1 : 2;

@@ -361,8 +361,10 @@ TEST(SurfaceGuards, EdgeGuardMatchesAPlainReference) {
 }
 
 // A flat ground's hits lie in one slab of z, so the pool's chunks go by
-// slabs of y there: the same grid and count as on one thread, for all
-// three guards (sky, gap, edge), with the blocks that hold hits flagged.
+// slabs of y there (a y path that skips a row fails here): the same grid
+// and count as on one thread, for all three guards (sky, gap, edge) and for
+// the sky guard alone (the first pass's own count), with the blocks that
+// hold hits flagged.
 TEST(SurfaceGuards, GuardsOnAFlatGroundOnWorkersMatchOneThread) {
   const float free = -0.85f, sky = std::nextafter(free, -1.0f), hit = 0.9f;
   const float kinds[] = {LocalGrid::kUnknown, sky, sky, free, 0.0f, 0.0f};
@@ -386,6 +388,16 @@ TEST(SurfaceGuards, GuardsOnAFlatGroundOnWorkersMatchOneThread) {
       LocalGrid guarded = ground;
       EXPECT_EQ(applySurfaceGuards(&guarded, guards, &pool, flags.data()), freed) << radius << " " << threads;
       EXPECT_EQ(std::memcmp(guarded.data(), expected.data(), expected.numCells() * sizeof(float)), 0)
+          << radius << " " << threads;
+    }
+    LocalGrid sky_expected = ground;
+    const size_t silenced = silenceNearOccupied(&sky_expected, sky, radius, nullptr, flags.data());
+    ASSERT_GT(silenced, 0u);
+    for (unsigned threads : {2u, 3u}) {
+      WorkerPool pool(threads);
+      LocalGrid guarded = ground;
+      EXPECT_EQ(silenceNearOccupied(&guarded, sky, radius, &pool, flags.data()), silenced) << radius << " " << threads;
+      EXPECT_EQ(std::memcmp(guarded.data(), sky_expected.data(), sky_expected.numCells() * sizeof(float)), 0)
           << radius << " " << threads;
     }
   }
