@@ -178,6 +178,7 @@ int wholePath(const so::FlightScenario& scenario, const std::vector<size_t>& fra
 /// One pass of the whole path over a flight's images on a fresh pipeline.
 struct PathPass {
   std::vector<double> whole_ms;  ///< per frame
+  so::StageTimes stages;         ///< summed over the frames
   size_t fused = 0;              ///< images fused
   std::string map_bytes;         ///< the map at the end, as .ot data (OcTree::writeData)
 };
@@ -191,7 +192,7 @@ PathPass wholePathPass(const so::FlightScenario& scenario, const std::vector<cv:
   PathPass pass;
   for (const auto& image : images) {
     const auto t0 = Clock::now();
-    pass.fused += path.run(image, nullptr);
+    pass.fused += path.run(image, &pass.stages);
     pass.whole_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
   }
   std::ostringstream data;
@@ -217,6 +218,7 @@ int threadRounds(const std::string& flight, int rounds) {
                "| round | one thread | two threads | two ÷ one | a copy, two at once | ceiling |\n"
                "|---:|---:|---:|---:|---:|---:|\n";
   std::vector<double> speedups, ceilings, one_means, two_means, copy_means;
+  std::vector<so::StageTimes> one_stages, two_stages;  // per round, mean per frame
   bool same_maps = true, all_fused = true;
   for (int r = 0; r < rounds; ++r) {
     const PathPass one = wholePathPass(scenario, disparities, 1);
@@ -229,6 +231,12 @@ int threadRounds(const std::string& flight, int rounds) {
     const double two_ms = so::TimeStatistics::of(two.whole_ms).mean_ms;
     const double copy_ms =
         0.5 * (so::TimeStatistics::of(copy_a.whole_ms).mean_ms + so::TimeStatistics::of(copy_b.whole_ms).mean_ms);
+    auto perFrame = [&](so::StageTimes t) {
+      for (double& ms : t.ms) ms /= static_cast<double>(disparities.size());
+      return t;
+    };
+    one_stages.push_back(perFrame(one.stages));
+    two_stages.push_back(perFrame(two.stages));
     one_means.push_back(one_ms);
     two_means.push_back(two_ms);
     copy_means.push_back(copy_ms);
@@ -259,6 +267,23 @@ int threadRounds(const std::string& flight, int rounds) {
             << copy_ms << " ms (ceiling " << 2.0 * one_ms / copy_ms
             << "x).\nThe maps of every pass: " << (same_maps ? "the same .ot bytes" : "DIFFERENT .ot bytes") << "; "
             << (all_fused ? "every image fused" : "an image was NOT fused") << "." << std::endl;
+  // Where a round that gained least lost its time, beside the median round.
+  std::vector<size_t> order(speedups.size());
+  for (size_t r = 0; r < order.size(); ++r) order[r] = r;
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return speedups[a] < speedups[b]; });
+  const size_t worst = order.front(), middle = order[order.size() / 2];
+  std::cout << "\nStage means [ms], one thread and two, in the round of the least gain (" << worst + 1
+            << ") and of the median gain (" << middle + 1
+            << "):\n\n| stage | least: one | least: two | median: one | median: two |\n|---|---:|---:|---:|---:|\n";
+  for (size_t s = 0; s < so::kPathStages; ++s)
+    std::cout << std::setprecision(3) << "| " << so::toString(static_cast<so::PathStage>(s)) << " | "
+              << one_stages[worst].ms[s] << " | " << two_stages[worst].ms[s] << " | " << one_stages[middle].ms[s]
+              << " | " << two_stages[middle].ms[s] << " |\n";
+  std::cout << "| outside the stages | " << one_means[worst] - one_stages[worst].total() << " | "
+            << two_means[worst] - two_stages[worst].total() << " | " << one_means[middle] - one_stages[middle].total()
+            << " | " << two_means[middle] - two_stages[middle].total() << " |\n| **whole path** | " << one_means[worst]
+            << " | " << two_means[worst] << " | " << one_means[middle] << " | " << two_means[middle] << " |"
+            << std::endl;
   return same_maps && all_fused ? 0 : 1;
 }
 
@@ -326,8 +351,9 @@ int run(int argc, char** argv) {
              "flight.\n"
              "--thread-rounds R (with --stages --flight NAME): R rounds of the whole path over the flight on "
              "one thread, on two, and two one-thread passes at once (the machine's ceiling for two cores), "
-             "each into a new map; prints each round's means, two threads ÷ one and the ceiling, and whether "
-             "every pass made the same map (exit 1 if not).\n"
+             "each into a new map; prints each round's means, two threads ÷ one and the ceiling, whether "
+             "every pass made the same map (exit 1 if not), and the stage means of the round that gained least "
+             "beside the median round's.\n"
              "STAGE: "
           << kStages << "\n";
       return 0;
