@@ -201,6 +201,20 @@ PathPass wholePathPass(const so::FlightScenario& scenario, const std::vector<cv:
   return pass;
 }
 
+/// The median of @p values (the upper one of an even count).
+double medianOf(std::vector<double> values) {
+  std::sort(values.begin(), values.end());
+  return values[values.size() / 2];
+}
+
+/// "median× (min-max)" of @p ratios.
+std::string ratioRange(const std::vector<double>& ratios) {
+  const auto [lo, hi] = std::minmax_element(ratios.begin(), ratios.end());
+  std::ostringstream text;
+  text << std::fixed << std::setprecision(2) << medianOf(ratios) << "x (" << *lo << "-" << *hi << ")";
+  return text.str();
+}
+
 /// Issue 48's two threads against one, with this machine's own ceiling in
 /// the same minutes: @p rounds rounds of the whole path over flight
 /// @p flight on one thread, on two, and two one-thread passes at once (two
@@ -250,21 +264,11 @@ int threadRounds(const std::string& flight, int rounds) {
     std::cout << std::fixed << std::setprecision(2) << "| " << r + 1 << " | " << one_ms << " | " << two_ms << " | "
               << speedups.back() << "x | " << copy_ms << " | " << ceilings.back() << "x |" << std::endl;
   }
-  auto range = [](std::vector<double> v) {
-    std::sort(v.begin(), v.end());
-    std::ostringstream text;
-    text << std::fixed << std::setprecision(2) << v[v.size() / 2] << "x (" << v.front() << "-" << v.back() << ")";
-    return text.str();
-  };
-  auto median = [](std::vector<double> v) {
-    std::sort(v.begin(), v.end());
-    return v[v.size() / 2];
-  };
-  const double one_ms = median(one_means), two_ms = median(two_means), copy_ms = median(copy_means);
-  std::cout << "\nTwo threads ÷ one, median (min-max) of the rounds: " << range(speedups)
-            << "; the ceiling: " << range(ceilings) << ".\nThe rounds' medians: one thread " << std::setprecision(2)
-            << one_ms << " ms, two threads " << two_ms << " ms (" << one_ms / two_ms << "x), a copy two at once "
-            << copy_ms << " ms (ceiling " << 2.0 * one_ms / copy_ms
+  const double one_ms = medianOf(one_means), two_ms = medianOf(two_means), copy_ms = medianOf(copy_means);
+  std::cout << "\nTwo threads ÷ one, median (min-max) of the rounds: " << ratioRange(speedups)
+            << "; the ceiling: " << ratioRange(ceilings) << ".\nThe rounds' medians: one thread "
+            << std::setprecision(2) << one_ms << " ms, two threads " << two_ms << " ms (" << one_ms / two_ms
+            << "x), a copy two at once " << copy_ms << " ms (ceiling " << 2.0 * one_ms / copy_ms
             << "x).\nThe maps of every pass: " << (same_maps ? "the same .ot bytes" : "DIFFERENT .ot bytes") << "; "
             << (all_fused ? "every image fused" : "an image was NOT fused") << "." << std::endl;
   // Where a round that gained least lost its time, beside the median round.
@@ -275,15 +279,18 @@ int threadRounds(const std::string& flight, int rounds) {
   std::cout << "\nStage means [ms], one thread and two, in the round of the least gain (" << worst + 1
             << ") and of the median gain (" << middle + 1
             << "):\n\n| stage | least: one | least: two | median: one | median: two |\n|---|---:|---:|---:|---:|\n";
+  const so::StageTimes* columns[] = {&one_stages[worst], &two_stages[worst], &one_stages[middle], &two_stages[middle]};
+  const double wholes[] = {one_means[worst], two_means[worst], one_means[middle], two_means[middle]};
+  auto row = [&](const std::string& name, const std::function<double(size_t column)>& value) {
+    std::cout << std::setprecision(3) << "| " << name;
+    for (size_t c = 0; c < 4; ++c) std::cout << " | " << value(c);
+    std::cout << " |\n";
+  };
   for (size_t s = 0; s < so::kPathStages; ++s)
-    std::cout << std::setprecision(3) << "| " << so::toString(static_cast<so::PathStage>(s)) << " | "
-              << one_stages[worst].ms[s] << " | " << two_stages[worst].ms[s] << " | " << one_stages[middle].ms[s]
-              << " | " << two_stages[middle].ms[s] << " |\n";
-  std::cout << "| outside the stages | " << one_means[worst] - one_stages[worst].total() << " | "
-            << two_means[worst] - two_stages[worst].total() << " | " << one_means[middle] - one_stages[middle].total()
-            << " | " << two_means[middle] - two_stages[middle].total() << " |\n| **whole path** | " << one_means[worst]
-            << " | " << two_means[worst] << " | " << one_means[middle] << " | " << two_means[middle] << " |"
-            << std::endl;
+    row(so::toString(static_cast<so::PathStage>(s)), [&](size_t c) { return columns[c]->ms[s]; });
+  row("outside the stages", [&](size_t c) { return wholes[c] - columns[c]->total(); });
+  row("**whole path**", [&](size_t c) { return wholes[c]; });
+  std::cout << std::flush;
   return same_maps && all_fused ? 0 : 1;
 }
 
