@@ -64,6 +64,11 @@ class AccumulatingOcTree : public octomap::OcTree {
       path_[static_cast<size_t>(depth)] = subtree;
     }
     void add(const octomap::OcTreeKey& key, float log_odds);
+    /// From now on, add() and addSiblings() set each leaf to the value given
+    /// instead of adding it: the leaf is created, or a pruned leaf above it
+    /// expanded, whatever the values (no clamped early return). A write-back
+    /// of values computed with add()'s semantics elsewhere (FusionCache).
+    void setValues() { set_values_ = true; }
     /// From now on, appends each cell whose class (unknown, free, occupied
     /// by @p occupied_log_odds) an add() changes to @p changes, with its class
     /// after the add (a created leaf was unknown, an expanded pruned leaf's
@@ -114,6 +119,7 @@ class AccumulatingOcTree : public octomap::OcTree {
     int known_depth_ = -1;                         ///< path_[floor_depth_ .. known_depth_] is valid
     octomap::OcTreeKey previous_;
     bool next_created_ = false;                        ///< the next add()'s first node is new (a worker's subtree)
+    bool set_values_ = false;                          ///< setValues(): leaves take the value given
     std::vector<CellClassChange>* changes_ = nullptr;  ///< null: not recording
     float occupied_log_odds_ = 0.0f;
     size_t max_changes_ = 0;
@@ -139,8 +145,9 @@ class AccumulatingOcTree : public octomap::OcTree {
   /// others. The tree is the same, bit for bit, as addSiblings() on one thread.
   /// @p log (null: none) gets the class changes: each worker's, in worker
   /// order, then this thread's (the same set as on one thread; another order).
+  /// @p set_values: the leaves take the values given instead (LeafUpdater::setValues()).
   void addSiblingsInParts(const std::vector<const std::vector<SiblingBlock>*>& parts, WorkerPool* pool,
-                          WorkerCounters* counters, ClassChangeLog* log = nullptr);
+                          WorkerCounters* counters, ClassChangeLog* log = nullptr, bool set_values = false);
 
   /// Sets the leaf of @p key at @p depth (pruned leaves keep their size).
   /// octomap 1.9's deleteNode leaves the emptied inner nodes' child arrays
@@ -217,7 +224,7 @@ inline void AccumulatingOcTree::LeafUpdater::descend(const octomap::OcTreeKey& k
       if (!t.nodeHasChildren(node) && !created) {  // a pruned leaf
         // A clamped one takes no update: updateNode's search() returns the
         // deepest existing node on the path if it has no children.
-        if (clamped(node, log_odds)) {
+        if (!set_values_ && clamped(node, log_odds)) {
           known_depth_ = depth;
           return;
         }
@@ -236,6 +243,10 @@ inline void AccumulatingOcTree::LeafUpdater::descend(const octomap::OcTreeKey& k
 
 inline void AccumulatingOcTree::LeafUpdater::updateLeaf(const octomap::OcTreeKey& key, octomap::OcTreeNode* leaf,
                                                         float log_odds, bool created) {
+  if (set_values_) {
+    leaf->setLogOdds(log_odds);
+    return;
+  }
   if (!created && clamped(leaf, log_odds)) return;
   if (changes_) {  // the only cost of recording when it is off
     updateRecording(key, leaf, log_odds, created);

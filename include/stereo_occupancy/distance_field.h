@@ -9,6 +9,8 @@
 
 #include <octomap/OcTree.h>
 
+#include <functional>
+
 #include <Eigen/Core>
 #include <Eigen/Geometry>  // AlignedBox3d
 
@@ -173,6 +175,14 @@ class DistanceField {
   /// outside the window costs nothing.
   void update(const octomap::OcTree& map, const std::vector<CellClassChange>& changes,
               const std::vector<CellBox>& regions, bool all, const Eigen::Vector3d& W_vehicle);
+  /// The map as update() gets it: called only when the field reads cells
+  /// (the window placed or moved, regions, all), at most once an update, so
+  /// that the caller makes the map current only then (MapAccumulator's
+  /// cache: MapAccumulator::leafTree()).
+  using MapSource = std::function<const octomap::OcTree&()>;
+  /// update() from @p map, asked only if cells are read (and its resolution checked then).
+  void update(const MapSource& map, const std::vector<CellClassChange>& changes, const std::vector<CellBox>& regions,
+              bool all, const Eigen::Vector3d& W_vehicle);
 
   /// The window's box in the map's frame [m].
   Eigen::AlignedBox3d window() const;
@@ -292,6 +302,10 @@ class DistanceField {
 
   // update()'s steps.
   Eigen::Vector3i wantedOrigin(const Eigen::Vector3d& W_vehicle) const;
+  /// @throws std::invalid_argument if @p map's resolution is not the field's.
+  void checkResolution(const octomap::OcTree& map) const;
+  /// The window's cells (global indices).
+  CellBox windowCells() const;
   void moveTo(const octomap::OcTree& map, const Eigen::Vector3i& origin_block);
   void readAll(const octomap::OcTree& map);
   /// Reads the local blocks [lo, hi) that entered from @p map and marks them (markEntered()).

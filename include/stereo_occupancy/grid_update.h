@@ -91,37 +91,6 @@ struct GridUpdateView {
   void forEachSiblingBlock(const SiblingBlockVisitor& f) const;
 };
 
-/// An update's sibling blocks (GridUpdateView::forEachSiblingBlock()) cut
-/// into slabs of global z, so that workers can walk the slabs at once: the
-/// parallel fusion's parts never span two slabs of their size. Visiting the
-/// slabs 0, 1, ... in turn is forEachSiblingBlock()'s walk. It keeps a copy
-/// of the view; the arrays it points to must outlive it.
-class SiblingBlockSlabs {
- public:
-  /// One row's stretch of the update's cells, [x0, x1) in local cells,
-  /// with values from log_odds[v] on (the walk's own bookkeeping).
-  struct Segment {
-    int64_t y, z, x0, x1;
-    size_t v;
-  };
-
-  /// @param slab_cells the slabs' thickness in global cells of z: even, > 0.
-  /// Requires update.isConsistent().
-  SiblingBlockSlabs(const GridUpdateView& update, int slab_cells);
-
-  /// The slabs that hold a block, in z order.
-  size_t size() const { return slab_begin_.size(); }
-
-  /// Calls f(first_global_index, values) for each block of slab @p slab, as
-  /// forEachSiblingBlock() does; different slabs may be visited at once.
-  void visit(size_t slab, const SiblingBlockVisitor& f) const;
-
- private:
-  const GridUpdateView update_;     ///< a copy: a GridUpdate's view would be a temporary
-  std::vector<Segment> segments_;   ///< the rows' stretches in z, y, x order
-  std::vector<size_t> slab_begin_;  ///< each slab's first segment
-};
-
 /// A GridUpdate that owns its arrays: what encodeGridUpdate() writes. Its
 /// vectors move into a message without a copy; read it through its view.
 struct GridUpdate {

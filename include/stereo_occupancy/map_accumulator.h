@@ -20,6 +20,7 @@
 namespace stereo_occupancy {
 
 class AccumulatingOcTree;
+class FusionCache;
 struct ClassChangeLog;
 
 /// Parameters of the global map.
@@ -77,12 +78,12 @@ class MapAccumulator {
   ~MapAccumulator();
 
   const MapAccumulatorConfig& config() const { return config_; }
-  /// The map, its inner nodes brought up to date first.
+  /// The map, the fusion's cache written back and its inner nodes brought up to date first.
   const octomap::OcTree& tree() const;
   /// The map as the fusion left it: its leaves current, its inner nodes'
   /// values perhaps not (tree() updates them in a pass over the whole tree).
   /// For readers of leaves only (the distance field), so that they do not
-  /// pay that pass after every update.
+  /// pay that pass after every update. The cache is written back first.
   const octomap::OcTree& leafTree() const;
 
   /// True if integrate() would take @p update: consistent (GridUpdateView::isConsistent),
@@ -93,8 +94,12 @@ class MapAccumulator {
   bool admits(const GridUpdateView& update, std::string* why = nullptr) const;
 
   /// Adds every cell's log-odds to the map (octomap's clamped update). Work
-  /// and memory follow the cells carried, not the box claimed. Returns
-  /// false, leaving the map unchanged, if admits() refuses the update.
+  /// and memory follow the cells carried, not the box claimed. The cells go
+  /// into dense blocks in front of the tree (fusion_cache.h), which the tree
+  /// takes when a block's changes are FusionCache::kMaxUnwrittenUpdates old,
+  /// when the block goes idle, or when anything reads the tree: every
+  /// method here sees the map of every update so far. Returns false,
+  /// leaving the map unchanged, if admits() refuses the update.
   bool integrate(const GridUpdateView& update, std::string* why = nullptr);
 
   /// Drops the cells farther than max_extent_m (per axis) from the bounding
@@ -229,12 +234,12 @@ class MapAccumulator {
   /// AccumulatingOcTree::pruneBelow() over @p tile's node, its depths
   /// kTileDepth to @p deepest (mergeEqualLeaves(), mergeTileAbove()).
   size_t mergeTileDownTo(const TileIndex& tile, unsigned deepest);
-  struct Fusion;  // the workers' parts of an update, and the workers
+  struct Fusion;  // the workers that write the cache back
   void applyThresholds();
-  /// integrate()'s walk through the update's sibling blocks on this thread.
-  void fuseInOrder(const GridUpdateView& update);
-  /// The same with the blocks of each kBlockCells cube on one of the workers.
-  void fuseInParts(const GridUpdateView& update);
+  /// The cache's changes into the tree: all of them, or the blocks that the
+  /// keys [lo, hi] overlap (what a reader of that box needs).
+  void writeBack() const;
+  void writeBack(const octomap::OcTreeKey& lo, const octomap::OcTreeKey& hi) const;
   /// Adds the blocks of @p edge_cells (kBlockCells, or kTileCells for tiles) that the leaf of
   /// @p key at @p depth spans to @p blocks (packed).
   void insertBlocksOf(const octomap::OcTreeKey& key, unsigned depth, std::unordered_set<uint64_t>* blocks,
@@ -253,7 +258,11 @@ class MapAccumulator {
   std::unordered_set<uint64_t> dirty_tiles_;     ///< packed TileIndex of the tiles changed
   bool all_dirty_ = false;                       ///< every tile changed (load)
   bool all_changed_ = true;                      ///< the whole map changed (reset, load)
-  std::unique_ptr<Fusion> fusion_;               ///< null: fusion on the calling thread
+  std::unique_ptr<Fusion> fusion_;               ///< null: write-backs on the calling thread
+  /// The updates' cells in front of the tree (fusion_cache.h); every reader
+  /// of the tree writes it back first, hence mutable.
+  std::unique_ptr<FusionCache> cache_;
+  std::vector<Eigen::Vector3i> touched_blocks_;  ///< integrate()'s blocks, kept for their memory
   /// Recording class changes: the changes since the last take; null: not recording.
   std::unique_ptr<ClassChangeLog> class_log_;
   bool classes_all_ = false;  ///< recording, and the map changed otherwise than by integrate()

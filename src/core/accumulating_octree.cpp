@@ -137,7 +137,8 @@ octomap::OcTreeNode* AccumulatingOcTree::partRoot(const octomap::OcTreeKey& key,
 }
 
 void AccumulatingOcTree::addSiblingsInParts(const std::vector<const std::vector<SiblingBlock>*>& parts,
-                                            WorkerPool* pool, WorkerCounters* counters, ClassChangeLog* log) {
+                                            WorkerPool* pool, WorkerCounters* counters, ClassChangeLog* log,
+                                            bool set_values) {
   const size_t num_parts = parts.size();
   struct Start {
     octomap::OcTreeNode* node;
@@ -183,6 +184,7 @@ void AccumulatingOcTree::addSiblingsInParts(const std::vector<const std::vector<
       const size_t p = on_workers[i];
       LeafUpdater updater((*counters)[worker].get(), starts[p].node, kPartDepth, parts[p]->front().first,
                           starts[p].created);
+      if (set_values) updater.setValues();
       record(&updater, log ? &log->per_worker[worker] : nullptr, pool->size());
       for (const SiblingBlock& b : *parts[p]) updater.addSiblings(b.first, b.values);
       if (updater.overflowed()) overflowed[worker] = 1;
@@ -193,6 +195,7 @@ void AccumulatingOcTree::addSiblingsInParts(const std::vector<const std::vector<
   }
   countNodes();
   LeafUpdater updater(this);
+  if (set_values) updater.setValues();
   if (log && !log->overflowed) record(&updater, &log->changes, 1);
   for (size_t p : here)
     for (const SiblingBlock& b : *parts[p]) updater.addSiblings(b.first, b.values);

@@ -172,10 +172,26 @@ Eigen::Vector3i DistanceField::blockOfLinear(int linear) const {
 
 void DistanceField::update(const octomap::OcTree& map, const std::vector<CellClassChange>& changes,
                            const std::vector<CellBox>& regions, bool all, const Eigen::Vector3d& W_vehicle) {
+  checkResolution(map);
+  update([&map]() -> const octomap::OcTree& { return map; }, changes, regions, all, W_vehicle);
+}
+
+void DistanceField::checkResolution(const octomap::OcTree& map) const {
   if (std::abs(map.getResolution() - resolution_m_) > 1e-9 * resolution_m_)
     throw std::invalid_argument("distance field: the map's resolution " + std::to_string(map.getResolution()) +
                                 " m is not the field's " + std::to_string(resolution_m_) + " m");
-  occupied_log_odds_ = map.getOccupancyThresLog();
+}
+
+void DistanceField::update(const MapSource& source, const std::vector<CellClassChange>& changes,
+                           const std::vector<CellBox>& regions, bool all, const Eigen::Vector3d& W_vehicle) {
+  const octomap::OcTree* read_from = nullptr;
+  auto map = [&]() -> const octomap::OcTree& {
+    if (read_from) return *read_from;
+    read_from = &source();
+    checkResolution(*read_from);
+    occupied_log_odds_ = read_from->getOccupancyThresLog();
+    return *read_from;
+  };
   ++epoch_;
   everything_ = false;
   last_read_cells_ = 0;
@@ -185,13 +201,14 @@ void DistanceField::update(const octomap::OcTree& map, const std::vector<CellCla
     // First, a jump beyond the window, or a map changed everywhere: read it all.
     origin_block_ = origin;
     for (int a = 0; a < 3; ++a) ring_phase_[a] = positiveMod(origin_block_[a], size_blocks_[a]);
-    readAll(map);
+    readAll(map());
     placed_ = true;
   } else {
-    if (origin != origin_block_) moveTo(map, origin);
+    if (origin != origin_block_) moveTo(map(), origin);
     applyChanges(changes);
     // After the changes: the map's cells in the regions are the newer word.
-    for (const CellBox& region : regions) readRegion(map, region);
+    for (const CellBox& region : regions)
+      if (!region.intersection(windowCells()).isEmpty()) readRegion(map(), region);
   }
   recompute();
 }
@@ -295,10 +312,14 @@ void DistanceField::readBlocks(const octomap::OcTree& map, const Eigen::Vector3i
   markEntered(lo, hi);
 }
 
+CellBox DistanceField::windowCells() const {
+  const Eigen::Vector3i origin_cell = origin_block_ * kBlockCells;
+  return CellBox(origin_cell, origin_cell + size_cells_ - Eigen::Vector3i::Ones());
+}
+
 void DistanceField::readRegion(const octomap::OcTree& map, const CellBox& cells) {
   const Eigen::Vector3i origin_cell = origin_block_ * kBlockCells;
-  const CellBox in_window =
-      cells.intersection(CellBox(origin_cell, origin_cell + size_cells_ - Eigen::Vector3i::Ones()));
+  const CellBox in_window = cells.intersection(windowCells());
   if (in_window.isEmpty()) return;
   const Eigen::Vector3i lo = (in_window.min() - origin_cell) / kBlockCells;
   const Eigen::Vector3i hi = (in_window.max() - origin_cell) / kBlockCells + Eigen::Vector3i::Ones();

@@ -144,7 +144,12 @@ void encodeGridUpdate(const LocalGrid& grid, const Eigen::Vector3d& W_sensor_ori
 
 namespace {
 
-using Segment = SiblingBlockSlabs::Segment;
+/// One row's stretch of an update's cells, [x0, x1) in local cells, with
+/// values from log_odds[v] on.
+struct Segment {
+  int64_t y, z, x0, x1;
+  size_t v;
+};
 
 /// The update's runs cut at the rows' ends (a run may go on into the next
 /// row), sorted by row, then x. Memory and work follow the runs, never the
@@ -291,25 +296,6 @@ void GridUpdateView::forEachSiblingBlock(const SiblingBlockVisitor& f) const {
   if (log_odds.empty()) return;
   const std::vector<Segment> segments = rowSegments(*this);
   walkStrips(*this, segments, 0, segments.size(), f);
-}
-
-SiblingBlockSlabs::SiblingBlockSlabs(const GridUpdateView& update, int slab_cells)
-    : update_(update), segments_(rowSegments(update)) {
-  if (slab_cells <= 0 || slab_cells % 2 != 0) throw std::invalid_argument("slab_cells must be even and > 0");
-  // A pair of planes (z0 even in global cells) never straddles a border of even slabs.
-  const int64_t oz = update.origin_index.z();
-  int64_t slab = std::numeric_limits<int64_t>::min();
-  for (size_t k = 0; k < segments_.size(); ++k) {
-    const int64_t global_z = oz + segments_[k].z;
-    const int64_t here = (global_z >= 0 ? global_z : global_z - (slab_cells - 1)) / slab_cells;  // floor
-    if (here != slab) slab_begin_.push_back(k);
-    slab = here;
-  }
-}
-
-void SiblingBlockSlabs::visit(size_t slab, const SiblingBlockVisitor& f) const {
-  const size_t end = slab + 1 < slab_begin_.size() ? slab_begin_[slab + 1] : segments_.size();
-  walkStrips(update_, segments_, slab_begin_[slab], end, f);
 }
 
 }  // namespace stereo_occupancy

@@ -9,6 +9,7 @@
 #include <unordered_map>
 
 #include "stereo_occupancy/accumulating_octree.h"
+#include "stereo_occupancy/fusion_cache.h"
 #include "stereo_occupancy/octomap_io.h"
 
 namespace stereo_occupancy {
@@ -22,33 +23,11 @@ bool MapAccumulatorConfig::isValid(std::string* why) const {
   return true;
 }
 
-/// Parts of a slab kept beyond an update's: more than kKeptPartsFactor times
-/// its parts and kKeptParts are let go (each keeps its blocks' memory).
-constexpr size_t kKeptPartsFactor = 4, kKeptParts = 64;
-
-namespace {
-
-/// The parts of one slab of an update (SiblingBlockSlabs), gathered by one
-/// worker; kept from update to update (their vectors keep their memory).
-struct SlabParts {
-  std::vector<std::vector<AccumulatingOcTree::SiblingBlock>> parts;  ///< [0, used) hold this update's
-  std::vector<uint64_t> part_block;                                  ///< packed BlockIndex of each part
-  std::unordered_map<uint64_t, size_t> part_of;                      ///< packed BlockIndex -> part
-  size_t used = 0;
-};
-
-/// Slabs kept beyond an update's (with their parts' memory); the others are let go.
-constexpr size_t kKeptSlabs = 16;
-
-}  // namespace
-
-/// The parts of one update for the workers, slab by slab.
+/// The workers that add an update into the cache and write its blocks into the tree.
 struct MapAccumulator::Fusion {
   explicit Fusion(unsigned threads) : pool(threads) {}
   WorkerPool pool;
   AccumulatingOcTree::WorkerCounters counters;
-  std::vector<SlabParts> slabs;                                             ///< [0, slabs used) hold this update's
-  std::vector<const std::vector<AccumulatingOcTree::SiblingBlock>*> parts;  ///< all slabs' parts, in z order
 };
 
 MapAccumulator::MapAccumulator(const MapAccumulatorConfig& config) : config_(config) {
@@ -56,12 +35,24 @@ MapAccumulator::MapAccumulator(const MapAccumulatorConfig& config) : config_(con
   if (!config_.isValid(&why)) throw std::invalid_argument(why);
   const unsigned threads = config_.threads == 0 ? WorkerPool::defaultThreads() : static_cast<unsigned>(config_.threads);
   if (threads > 1) fusion_ = std::make_unique<Fusion>(threads);
+  cache_ = std::make_unique<FusionCache>();
   reset();
 }
 
 MapAccumulator::~MapAccumulator() = default;
 
+void MapAccumulator::writeBack() const {
+  const size_t cells = fusion_ ? cache_->writeBack(tree_.get(), &fusion_->pool, &fusion_->counters)
+                               : cache_->writeBack(tree_.get(), nullptr, nullptr);
+  inner_stale_ = inner_stale_ || cells > 0;
+}
+
+void MapAccumulator::writeBack(const octomap::OcTreeKey& lo, const octomap::OcTreeKey& hi) const {
+  inner_stale_ = cache_->writeBack(tree_.get(), lo, hi) > 0 || inner_stale_;
+}
+
 const octomap::OcTree& MapAccumulator::tree() const {
+  writeBack();
   // Inner nodes are brought up to date only when someone looks: a full pass
   // over the tree per update would cost more than the update as the map grows.
   if (inner_stale_) {
@@ -71,7 +62,10 @@ const octomap::OcTree& MapAccumulator::tree() const {
   return *tree_;
 }
 
-const octomap::OcTree& MapAccumulator::leafTree() const { return *tree_; }
+const octomap::OcTree& MapAccumulator::leafTree() const {
+  writeBack();
+  return *tree_;
+}
 
 void MapAccumulator::applyThresholds() {
   tree_->setClampingThresMin(config_.clamping_min_prob);
@@ -222,6 +216,7 @@ void MapAccumulator::reset() {
   all_dirty_ = false;
   dirty_tiles_.clear();
   inner_stale_ = false;
+  cache_->clear();
   tree_ = std::make_unique<AccumulatingOcTree>(config_.resolution_m);
   applyThresholds();
   updates_ = 0;
@@ -291,6 +286,7 @@ size_t MapAccumulator::clearBox(const Eigen::Vector3d& W_min, const Eigen::Vecto
   }
   const float cleared = tree_->getClampingThresMinLog();
   const int offset = static_cast<int>(tree_->coordToKey(0.0));
+  if (!cells.empty()) cache_->drop(key_lo, key_hi);  // tree() wrote them back
   for (const octomap::OcTreeKey& k : cells) {
     tree_->setNodeValue(k, cleared, /*lazy_eval=*/true);
     const Eigen::Vector3i b(blockOf(k[0] - offset), blockOf(k[1] - offset), blockOf(k[2] - offset));
@@ -342,12 +338,17 @@ bool MapAccumulator::admits(const GridUpdateView& update, std::string* why) cons
 
 bool MapAccumulator::integrate(const GridUpdateView& update, std::string* why) {
   if (!admits(update, why)) return false;
-  if (fusion_)
-    fuseInParts(update);
-  else
-    fuseInOrder(update);
+  // admits() put every cell inside the key range.
+  cache_->add(update, *tree_, static_cast<int>(tree_->coordToKey(0.0)), recordingLog(), &touched_blocks_,
+              fusion_ ? &fusion_->pool : nullptr);
+  for (const Eigen::Vector3i& b : touched_blocks_) {
+    if (!all_changed_) changed_blocks_.insert(packBlock(b));
+    dirty_tiles_.insert(packedTileOf(b));
+  }
+  const size_t written = fusion_ ? cache_->maintain(tree_.get(), &fusion_->pool, &fusion_->counters)
+                                 : cache_->maintain(tree_.get(), nullptr, nullptr);
   if (class_log_ && class_log_->overflowed) classesChangedEverywhere();  // too many to keep
-  inner_stale_ = true;
+  inner_stale_ = inner_stale_ || written > 0;
   if (W_recent_origins_.size() < kPruneOrigins) {
     W_recent_origins_.push_back(update.W_sensor_origin);
   } else {
@@ -358,100 +359,6 @@ bool MapAccumulator::integrate(const GridUpdateView& update, std::string* why) {
   W_extent_.extend(W_lo).extend(W_lo + update.size.cast<double>() * config_.resolution_m);
   ++updates_;
   return true;
-}
-
-void MapAccumulator::fuseInOrder(const GridUpdateView& update) {
-  const int offset = static_cast<int>(tree_->coordToKey(0.0));  // key of global index 0
-  // Sibling leaves one after another (an octree node's eight cells): the
-  // updater descends from the previous key's common ancestor, mostly the
-  // same parent, and a new node's children are created together, so they
-  // lie together in memory for the next update too. Over a flight this walk
-  // is about a third faster than the storage order (docs/performance.md).
-  // admits() put every block inside the key range.
-  AccumulatingOcTree::LeafUpdater updater(tree_.get());
-  ClassChangeLog* log = recordingLog();
-  if (log)
-    updater.recordClassChanges(&log->changes, tree_->getOccupancyThresLog(), log->max_changes - log->changes.size());
-  // Consecutive sibling blocks mostly lie in the same change-tracking block:
-  // the set is asked only when the block differs from the last one.
-  uint64_t last_block = ~uint64_t{0};
-  update.forEachSiblingBlock([&](const Eigen::Vector3i& g, const float(&values)[8]) {
-    const octomap::OcTreeKey first(static_cast<octomap::key_type>(g.x() + offset),
-                                   static_cast<octomap::key_type>(g.y() + offset),
-                                   static_cast<octomap::key_type>(g.z() + offset));
-    updater.addSiblings(first, values);  // = updateNode(key, log_odds, lazy) per cell
-    const Eigen::Vector3i b(blockOf(g.x()), blockOf(g.y()), blockOf(g.z()));
-    const uint64_t block = packBlock(b);
-    if (block != last_block) {
-      if (!all_changed_) changed_blocks_.insert(block);
-      dirty_tiles_.insert(packedTileOf(b));
-      last_block = block;
-    }
-  });
-  if (log && updater.overflowed()) log->overflowed = true;
-}
-
-namespace {
-
-/// Gathers slab @p slab's sibling blocks into @p out's parts, one part per
-/// kBlockCells cube, each in the walk's order (the parts in the order the
-/// walk meets them).
-void gatherSlab(const SiblingBlockSlabs& slabs, size_t slab, int key_offset, SlabParts* out) {
-  for (size_t p = 0; p < out->used; ++p) out->parts[p].clear();
-  out->used = 0;
-  out->part_of.clear();
-  out->part_block.clear();
-  // Consecutive sibling blocks mostly lie in the same part, so the map is asked when it changes.
-  uint64_t last_block = ~uint64_t{0};
-  std::vector<AccumulatingOcTree::SiblingBlock>* part = nullptr;
-  slabs.visit(slab, [&](const Eigen::Vector3i& g, const float(&values)[8]) {
-    const uint64_t block = packBlock(Eigen::Vector3i(blockOf(g.x()), blockOf(g.y()), blockOf(g.z())));
-    if (block != last_block) {
-      const auto inserted = out->part_of.emplace(block, out->used);
-      if (inserted.second) {
-        if (out->parts.size() == out->used) out->parts.emplace_back();
-        out->part_block.push_back(block);
-        ++out->used;
-      }
-      part = &out->parts[inserted.first->second];
-      last_block = block;
-    }
-    AccumulatingOcTree::SiblingBlock b;
-    b.first = octomap::OcTreeKey(static_cast<octomap::key_type>(g.x() + key_offset),
-                                 static_cast<octomap::key_type>(g.y() + key_offset),
-                                 static_cast<octomap::key_type>(g.z() + key_offset));
-    std::copy(values, values + 8, b.values);
-    part->push_back(b);
-  });
-  // A part holds at most one block's 512 sibling blocks; only a rare huge
-  // update leaves many more parts than the next needs: let them go.
-  if (out->parts.size() > kKeptPartsFactor * out->used + kKeptParts) out->parts.resize(out->used);
-}
-
-}  // namespace
-
-void MapAccumulator::fuseInParts(const GridUpdateView& update) {
-  static_assert(kBlockCells == 1 << (16 - AccumulatingOcTree::kPartDepth), "a part is one change-tracking block");
-  Fusion& f = *fusion_;
-  // The workers gather the slabs' parts at once (a part never spans two
-  // slabs), then fuse the parts: the same parts, each in the same order, as
-  // one walk of the whole update.
-  const SiblingBlockSlabs slabs(update, kBlockCells);
-  if (f.slabs.size() < slabs.size()) f.slabs.resize(slabs.size());
-  const int key_offset = static_cast<int>(tree_->coordToKey(0.0));
-  f.pool.run(slabs.size(), [&](size_t slab, unsigned) { gatherSlab(slabs, slab, key_offset, &f.slabs[slab]); });
-  f.parts.clear();
-  for (size_t slab = 0; slab < slabs.size(); ++slab)
-    for (size_t p = 0; p < f.slabs[slab].used; ++p) f.parts.push_back(&f.slabs[slab].parts[p]);
-  tree_->addSiblingsInParts(f.parts, &f.pool, &f.counters, recordingLog());
-  for (size_t slab = 0; slab < slabs.size(); ++slab)
-    for (const uint64_t block : f.slabs[slab].part_block) {
-      if (!all_changed_) changed_blocks_.insert(block);
-      const Eigen::Vector3i b = unpackBlock(block);
-      dirty_tiles_.insert(packedTileOf(b));
-    }
-  // Slabs beyond this update's keep an earlier update's parts: only a few.
-  if (f.slabs.size() > slabs.size() + kKeptSlabs) f.slabs.resize(slabs.size() + kKeptSlabs);
 }
 
 size_t MapAccumulator::prune() {
@@ -468,6 +375,7 @@ size_t MapAccumulator::prune() {
   if (W_extent_.isEmpty() ||
       ((W_extent_.min().array() >= lo - slack_m).all() && (W_extent_.max().array() <= hi + slack_m).all()))
     return 0;
+  writeBack();
   W_extent_ = W_extent_.intersection(Eigen::AlignedBox3d(lo.matrix(), hi.matrix()));
   auto inside = [&](const octomap::OcTree::leaf_iterator& it) {
     const Eigen::Array3d p(it.getX(), it.getY(), it.getZ());
@@ -497,6 +405,7 @@ size_t MapAccumulator::prune() {
   kept->updateInnerOccupancy();
   tree_ = std::move(kept);
   applyThresholds();
+  cache_->clear();  // its blocks may hold dropped cells
   return outside;
 }
 
@@ -531,6 +440,7 @@ std::vector<MapAccumulator::TileIndex> MapAccumulator::tilesOf(const GridUpdateV
 }
 
 std::vector<MapAccumulator::TileIndex> MapAccumulator::tiles() const {
+  writeBack();
   const int offset = static_cast<int>(tree_->coordToKey(0.0));
   std::unordered_set<uint64_t> seen;
   // Leaves at most kTileDepth deep: the tile nodes, and coarser leaves that span several.
@@ -567,6 +477,7 @@ std::vector<MapAccumulator::Leaf> MapAccumulator::tileLeaves(const TileIndex& ti
   if (!tileInKeyRange(tile)) return leaves;
   octomap::OcTreeKey lo, hi;
   tileKeys(tile, static_cast<int>(tree_->coordToKey(0.0)), &lo, &hi);
+  writeBack(lo, hi);
   for (auto it = tree_->begin_leafs_bbx(lo, hi), end = tree_->end_leafs_bbx(); it != end; ++it) {
     if (!leafOverlaps(it, tree_->getTreeDepth(), lo, hi)) continue;
     Leaf leaf;
@@ -587,10 +498,18 @@ std::vector<octomap::OcTreeKey> MapAccumulator::partsToMerge(const TileIndex& ti
   if (!tileInKeyRange(tile)) return {};
   octomap::OcTreeKey lo, hi;
   tileKeys(tile, static_cast<int>(tree_->coordToKey(0.0)), &lo, &hi);
+  writeBack(lo, hi);
   return tree_->innerNodesBelow(lo, kTileDepth, AccumulatingOcTree::kPartDepth);
 }
 
 size_t MapAccumulator::mergePart(const octomap::OcTreeKey& part) {
+  // A part is one of the cache's blocks.
+  octomap::OcTreeKey lo = part, hi = part;
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = static_cast<octomap::key_type>(part[a] & ~(FusionCache::kEdge - 1));
+    hi[a] = static_cast<octomap::key_type>(lo[a] + FusionCache::kEdge - 1);
+  }
+  writeBack(lo, hi);
   const size_t merged = tree_->pruneBelow(part, AccumulatingOcTree::kPartDepth);
   inner_stale_ = inner_stale_ || merged > 0;
   return merged;
@@ -604,6 +523,7 @@ size_t MapAccumulator::mergeTileDownTo(const TileIndex& tile, unsigned deepest) 
   if (!tileInKeyRange(tile)) return 0;
   octomap::OcTreeKey lo, hi;
   tileKeys(tile, static_cast<int>(tree_->coordToKey(0.0)), &lo, &hi);
+  writeBack(lo, hi);
   const size_t merged = tree_->pruneBelow(lo, kTileDepth, deepest);
   inner_stale_ = inner_stale_ || merged > 0;
   return merged;
@@ -613,6 +533,8 @@ size_t MapAccumulator::dropTile(const TileIndex& tile) {
   if (!tileInKeyRange(tile)) return 0;
   octomap::OcTreeKey lo, hi;
   tileKeys(tile, static_cast<int>(tree_->coordToKey(0.0)), &lo, &hi);
+  writeBack(lo, hi);
+  cache_->drop(lo, hi);
   size_t leaves = 0;
   for (auto it = tree_->begin_leafs_bbx(lo, hi), end = tree_->end_leafs_bbx(); it != end; ++it) {
     if (!leafOverlaps(it, tree_->getTreeDepth(), lo, hi)) continue;
@@ -629,6 +551,20 @@ size_t MapAccumulator::dropTile(const TileIndex& tile) {
 }
 
 void MapAccumulator::insertLeaves(const std::vector<Leaf>& leaves) {
+  if (!leaves.empty()) {
+    // The cache's blocks there hold the cells before these leaves.
+    octomap::OcTreeKey key_lo(0xffff, 0xffff, 0xffff), key_hi(0, 0, 0);
+    for (const Leaf& leaf : leaves) {
+      const unsigned side = 1u << (tree_->getTreeDepth() - leaf.depth);
+      for (int a = 0; a < 3; ++a) {
+        const unsigned first = leaf.key[a] & ~(side - 1);
+        key_lo[a] = static_cast<octomap::key_type>(std::min<unsigned>(key_lo[a], first));
+        key_hi[a] = static_cast<octomap::key_type>(std::max<unsigned>(key_hi[a], first + side - 1));
+      }
+    }
+    writeBack(key_lo, key_hi);
+    cache_->drop(key_lo, key_hi);
+  }
   const float lo = tree_->getClampingThresMinLog(), hi = tree_->getClampingThresMaxLog();
   for (const Leaf& leaf : leaves) tree_->setLeaf(leaf.key, leaf.depth, std::clamp(leaf.log_odds, lo, hi));
   if (leaves.empty()) return;

@@ -267,8 +267,11 @@ void DistanceFieldServer::update() {
   read_whole_window_ = true;  // until this update has gone through
   const MapAccumulator& map = fusion_->map();
   field_->write([&](DistanceField& field, DistanceFieldInfo& info) {
-    // The leaves only: the inner nodes' pass over the whole tree waits for the outputs that read them.
-    field.update(map.leafTree(), changes, regions, all, fusion_->lastSensorOrigin());
+    // The leaves only: the inner nodes' pass over the whole tree waits for
+    // the outputs that read them; and only when the field reads cells, as
+    // the fusion's cache is written back for them.
+    field.update([&map]() -> const octomap::OcTree& { return map.leafTree(); }, changes, regions, all,
+                 fusion_->lastSensorOrigin());
     info.frame_id = fusion_->frameId();
     info.stamp = fusion_->lastStamp();
     ++info.updates;

@@ -41,8 +41,15 @@ struct FieldScene {
     bool all = false;
     std::vector<CellBox> regions;
     const std::vector<CellClassChange> changes = map.takeClassChanges(&all, &regions);
-    field.update(map.leafTree(), changes, regions, all, W_vehicle);  // as the ROS glue does
+    // As the ROS glue does: the map made current only when the field reads it.
+    field.update(
+        [this]() -> const octomap::OcTree& {
+          ++map_reads;
+          return map.leafTree();
+        },
+        changes, regions, all, W_vehicle);
   }
+  size_t map_reads = 0;  ///< the updates that read the map
   MapAccumulator map;
   DistanceField field;
 };

@@ -301,11 +301,16 @@ TEST(DistanceField, WorkFollowsTheChanges) {
                               W_vehicle));
   const size_t window_cells = 200 * 200 * 40;
   EXPECT_EQ(scene.field.lastUpdatedCells(), window_cells);  // the first: all
+  EXPECT_EQ(scene.map_reads, 1u);
   GridUpdate one = randomUpdate(&rng, Eigen::Vector3i(4, 4, 4), Eigen::Vector3i(1, 1, 1), 0.0, 1.0);
   ASSERT_TRUE(scene.integrate(one, W_vehicle));
   EXPECT_EQ(scene.field.lastUpdatedCells(), 27u * 512u);
   ASSERT_TRUE(scene.integrate(one, W_vehicle));  // occupied already: no class changes
   EXPECT_EQ(scene.field.lastUpdatedCells(), 0u);
+  // The class changes come from the fusion: the map was not asked for (nor its cache written back).
+  EXPECT_EQ(scene.map_reads, 1u);
+  ASSERT_TRUE(scene.integrate(one, W_vehicle + Eigen::Vector3d(8.0, 0.0, 0.0)));  // the window moves
+  EXPECT_EQ(scene.map_reads, 2u);
   EXPECT_EQ(scene.field.sample(Eigen::Vector3d(4.5, 4.5, 4.5) * kRes).distance_m, 0.0f);
 }
 
@@ -330,8 +335,10 @@ TEST(DistanceField, RegionsReadOnlyTheirPartOfTheWindow) {
     ASSERT_TRUE(matchesBruteForce(scene));
     const BruteForceField before(scene.field, scene.map.tree());
     ASSERT_GT(scene.map.prune(), 0u);
+    const size_t reads = scene.map_reads;
     scene.refresh(W_vehicle);
     EXPECT_EQ(scene.field.lastReadCells(), 0u);
+    EXPECT_EQ(scene.map_reads, reads);  // its regions lie outside the window
     EXPECT_EQ(scene.field.lastUpdatedCells(), 0u);
     EXPECT_TRUE(matchesBruteForce(scene));
     const BruteForceField after(scene.field, scene.map.tree());

@@ -106,67 +106,6 @@ TEST(GridUpdate, EncodingOnAPoolEqualsOneScan) {
   EXPECT_TRUE(none.run_start.empty() && none.log_odds.empty());
 }
 
-// The slabs the parallel fusion's workers walk: in turn, they are
-// forEachSiblingBlock()'s walk block for block (same order, same values),
-// each slab's blocks lie in its own z range, the slabs follow in z, and
-// slabs of odd thickness are refused. Origins below and above 0, grids
-// thinner and thicker than a slab.
-TEST(GridUpdate, SlabsInTurnAreTheSiblingWalk) {
-  std::mt19937 rng(11);
-  struct Block {
-    Eigen::Vector3i g;
-    std::array<float, 8> values;
-  };
-  auto same = [](const Block& a, const Block& b) {
-    return a.g == b.g && std::memcmp(a.values.data(), b.values.data(), sizeof a.values) == 0;  // NaN too
-  };
-  size_t most_slabs = 0;
-  for (int trial = 0; trial < 60; ++trial) {
-    LocalGrid grid;
-    const Eigen::Vector3i origin(static_cast<int>(rng() % 41) - 20, static_cast<int>(rng() % 41) - 20,
-                                 static_cast<int>(rng() % 81) - 40);
-    const Eigen::Vector3i size(1 + rng() % 12, 1 + rng() % 9, 1 + rng() % 50);
-    grid.reset(origin, size, 0.25);
-    const double density = (rng() % 100) / 100.0;
-    for (size_t i = 0; i < grid.numCells(); ++i)
-      if ((rng() % 1000) / 1000.0 < density) grid.data()[i] = 0.01f * static_cast<float>(1 + rng() % 300);
-    GridUpdate u;
-    encodeGridUpdate(grid, Eigen::Vector3d::Zero(), &u);
-    std::vector<Block> walk, by_slabs;
-    u.forEachSiblingBlock([&](const Eigen::Vector3i& g, const float(&values)[8]) {
-      walk.push_back({g, {values[0], values[1], values[2], values[3], values[4], values[5], values[6], values[7]}});
-    });
-    for (const int slab_cells : {2, 16}) {
-      const SiblingBlockSlabs slabs(u, slab_cells);
-      by_slabs.clear();
-      int last_slab = std::numeric_limits<int>::min();
-      for (size_t slab = 0; slab < slabs.size(); ++slab) {
-        const size_t before = by_slabs.size();
-        slabs.visit(slab, [&](const Eigen::Vector3i& g, const float(&values)[8]) {
-          by_slabs.push_back(
-              {g, {values[0], values[1], values[2], values[3], values[4], values[5], values[6], values[7]}});
-        });
-        ASSERT_GT(by_slabs.size(), before) << "an empty slab";
-        const int z_slab = static_cast<int>(std::floor(by_slabs[before].g.z() / static_cast<double>(slab_cells)));
-        EXPECT_GT(z_slab, last_slab) << "slabs out of z order";
-        for (size_t k = before; k < by_slabs.size(); ++k)
-          EXPECT_EQ(std::floor(by_slabs[k].g.z() / static_cast<double>(slab_cells)), z_slab)
-              << "a block outside its slab";
-        last_slab = z_slab;
-      }
-      most_slabs = std::max(most_slabs, slabs.size());
-      ASSERT_EQ(by_slabs.size(), walk.size()) << "trial " << trial << ", slabs of " << slab_cells;
-      for (size_t k = 0; k < walk.size(); ++k)
-        ASSERT_TRUE(same(by_slabs[k], walk[k])) << "block " << k << ", trial " << trial;
-    }
-  }
-  EXPECT_GE(most_slabs, 10u);
-  GridUpdate empty;
-  empty.size = Eigen::Vector3i(2, 2, 2);
-  EXPECT_EQ(SiblingBlockSlabs(empty, 16).size(), 0u);
-  EXPECT_THROW(SiblingBlockSlabs(empty, 3), std::invalid_argument);
-}
-
 // Every value is checked, wherever it stands; finite extremes pass.
 TEST(GridUpdate, RefusesNonFiniteValues) {
   LocalGrid grid;

@@ -362,12 +362,166 @@ TEST(MapAccumulator, IntegrateEqualsUpdateNodeOverAFlight) {
   EXPECT_EQ(fullTree(map.tree()), fullTree(plain));
 }
 
-// Fusion on several threads (each 16-cell cube's blocks on one worker)
-// against one thread: over a flight's overlapping views, into a map that
+// The fusion's cache (fusion_cache.h) against updateNode cell by cell, over
+// 26 updates of a flight (25 in a row, then a jump that leaves the first
+// views' blocks idle) into a map holding pruned, clamped free and occupied
+// cubes: the tree read after 6 updates (a write-back for the reader), after
+// 18 (the cache's own write-backs of blocks 16 updates old and of idle
+// ones in between) and at the end is updateNode's tree node for node; a
+// clamped cube that updates only confirmed stays one leaf.
+TEST(MapAccumulator, TheCachedFusionIsUpdateNodesTreeWhenRead) {
+  const FlightScenario scenario = makeScenario("posts");
+  std::vector<size_t> frames;
+  for (size_t k = 0; k < 25; ++k) frames.push_back(k);
+  frames.push_back(90);
+  DrawingConfig drawing;
+  drawing.algorithm = DrawingAlgorithm::kLinePyramid;
+  drawing.resolution_m = 0.5;
+  DisparityDrawer drawer(scenario.camera, drawing);
+  MapAccumulatorConfig cfg;
+  cfg.resolution_m = 0.5;
+  // Clamped cubes ahead of the first camera, each one pruned leaf: free ones
+  // (the views' free rays end in them), an occupied one on the ground, and a
+  // free one high above, which the views' free space only confirms.
+  octomap::OcTree cubes(cfg.resolution_m);
+  cubes.setClampingThresMin(cfg.clamping_min_prob);
+  cubes.setClampingThresMax(cfg.clamping_max_prob);
+  const int offset = static_cast<int>(cubes.coordToKey(0.0));
+  auto cube = [&](int edge, const Eigen::Vector3d& W_near, float log_odds) {
+    const Eigen::Vector3i first = (W_near / (cfg.resolution_m * edge)).array().floor().cast<int>() * edge;
+    for (int z = 0; z < edge; ++z)
+      for (int y = 0; y < edge; ++y)
+        for (int x = 0; x < edge; ++x) {
+          const Eigen::Vector3i g = first + Eigen::Vector3i(x, y, z);
+          cubes.setNodeValue(octomap::OcTreeKey(g.x() + offset, g.y() + offset, g.z() + offset), log_odds);
+        }
+  };
+  const float free_log_odds = static_cast<float>(logit(cfg.clamping_min_prob));
+  const float occupied_log_odds = static_cast<float>(logit(cfg.clamping_max_prob));
+  const Eigen::Isometry3d T0 = scenario.cameraPose(0);
+  cube(32, T0 * Eigen::Vector3d(0.0, 0.0, 10.0), free_log_odds);  // a leaf above the cache's blocks
+  cube(8, T0 * Eigen::Vector3d(0.0, 3.0, 14.0), occupied_log_odds);
+  cube(8, T0 * Eigen::Vector3d(0.0, -100.0, 0.0), free_log_odds);  // far above: nobody looks there
+  cubes.updateInnerOccupancy();
+  cubes.prune();
+  ASSERT_LE(cubes.getNumLeafNodes(), 3u);
+  const std::string path = ::testing::TempDir() + "cached_fusion_cubes.ot";
+  ASSERT_TRUE(cubes.write(path));
+
+  MapAccumulator map(cfg);
+  map.load(path);
+  std::unique_ptr<octomap::AbstractOcTree> read(octomap::AbstractOcTree::read(path));
+  auto* plain = dynamic_cast<octomap::OcTree*>(read.get());
+  ASSERT_NE(plain, nullptr);
+  plain->setClampingThresMin(cfg.clamping_min_prob);
+  plain->setClampingThresMax(cfg.clamping_max_prob);
+  plain->setOccupancyThres(cfg.occupancy_threshold_prob);
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const Eigen::Isometry3d T = scenario.cameraPose(frames[i]);
+    LocalGrid grid;
+    drawer.draw(renderStereoFrame(scenario, frames[i], 1), T, &grid);
+    GridUpdate update;
+    encodeGridUpdate(grid, T.translation(), &update);
+    ASSERT_GT(update.numCells(), 1000u);
+    ASSERT_TRUE(map.integrate(update));
+    update.forEachCell([&](const Eigen::Vector3i& g, float v) {
+      plain->updateNode(octomap::OcTreeKey(g.x() + offset, g.y() + offset, g.z() + offset), v, true);
+    });
+    if (i == 5 || i == 17 || i + 1 == frames.size()) {
+      plain->updateInnerOccupancy();
+      ASSERT_EQ(map.tree().size(), plain->size()) << "after update " << i + 1;
+      ASSERT_EQ(fullTree(map.tree()), fullTree(*plain)) << "after update " << i + 1;
+    }
+  }
+  // The views reached into the free cube ahead (expanded), not into the one above.
+  auto leavesNear = [&](const Eigen::Vector3d& W_p, double half_m) {
+    size_t n = 0;
+    const octomap::point3d lo(W_p.x() - half_m, W_p.y() - half_m, W_p.z() - half_m);
+    const octomap::point3d hi(W_p.x() + half_m, W_p.y() + half_m, W_p.z() + half_m);
+    for (auto it = map.tree().begin_leafs_bbx(lo, hi), end = map.tree().end_leafs_bbx(); it != end; ++it) ++n;
+    return n;
+  };
+  EXPECT_GT(leavesNear(T0 * Eigen::Vector3d(0.0, 0.0, 10.0), 0.5), 1u);
+  EXPECT_EQ(leavesNear(T0 * Eigen::Vector3d(0.0, -100.0, 0.0), 0.5), 1u);
+  std::remove(path.c_str());
+}
+
+namespace {
+/// Integrates @p update into @p map and expects each of its cells to hold
+/// updateNode's value from the value the map's tree gave it just before (a
+/// cache that kept a cell's value from before a clear, a dropped tile or a
+/// prune would add to that instead). Returns the cells whose value changed.
+size_t expectAddedToTheTreesValues(MapAccumulator* map, const GridUpdate& update) {
+  const octomap::OcTree& tree = map->tree();
+  const int offset = static_cast<int>(tree.coordToKey(0.0));
+  const float lo = tree.getClampingThresMinLog(), hi = tree.getClampingThresMaxLog();
+  auto keyOf = [offset](const Eigen::Vector3i& g) {
+    return octomap::OcTreeKey(g.x() + offset, g.y() + offset, g.z() + offset);
+  };
+  std::vector<float> before;
+  update.forEachCell([&](const Eigen::Vector3i& g, float) {
+    const octomap::OcTreeNode* node = map->tree().search(keyOf(g));
+    before.push_back(node ? node->getLogOdds() : std::numeric_limits<float>::quiet_NaN());
+  });
+  EXPECT_TRUE(map->integrate(update));
+  size_t i = 0, wrong = 0, changed = 0;
+  update.forEachCell([&](const Eigen::Vector3i& g, float u) {
+    const float v = before[i++];
+    float expected = v;
+    if (std::isnan(v))
+      expected = std::clamp(0.0f + u, lo, hi);
+    else if (!((u >= 0.0f && v >= hi) || (u <= 0.0f && v <= lo)))
+      expected = std::clamp(v + u, lo, hi);
+    const octomap::OcTreeNode* node = map->tree().search(keyOf(g));
+    wrong += !node || node->getLogOdds() != expected;
+    changed += !(expected == v);
+  });
+  EXPECT_EQ(wrong, 0u) << "of " << i << " cells";
+  return changed;
+}
+}  // namespace
+
+// The fusion's cache holds a block's values from update to update: a clear,
+// a dropped tile and a prune change the tree's, and the next update adds to
+// the tree's new values, not to the cached old ones.
+TEST(MapAccumulator, UpdatesAfterAClearADroppedTileOrAPruneAddToTheTreesValues) {
+  const FlightScenario scenario = makeScenario("posts");
+  const std::vector<GridUpdate> updates = flightUpdates(scenario, {0u});
+  const GridUpdate& u = updates[0];
+  MapAccumulatorConfig cfg;
+  const Eigen::Vector3d W_lo = u.origin_index.cast<double>() * cfg.resolution_m;
+  const Eigen::Vector3d W_hi = W_lo + u.size.cast<double>() * cfg.resolution_m;
+  {
+    MapAccumulator map(cfg);
+    ASSERT_TRUE(map.integrate(u));
+    ASSERT_TRUE(map.integrate(u));
+    ASSERT_GT(map.clearBox(W_lo, W_hi), 100u);  // every occupied cell of the view
+    EXPECT_GT(expectAddedToTheTreesValues(&map, u), 100u);
+  }
+  {
+    MapAccumulator map(cfg);
+    ASSERT_TRUE(map.integrate(u));
+    const Eigen::Vector3i first_cell = u.origin_index + u.size / 2;
+    const MapAccumulator::TileIndex tile =
+        (first_cell.cast<double>() / MapAccumulator::kTileCells).array().floor().cast<int>().matrix();
+    ASSERT_GT(map.dropTile(tile), 100u);
+    EXPECT_GT(expectAddedToTheTreesValues(&map, u), 100u);
+  }
+  {
+    cfg.max_extent_m = 4.0;  // less than the view's range: a prune drops its far cells
+    MapAccumulator map(cfg);
+    ASSERT_TRUE(map.integrate(u));
+    ASSERT_GT(map.prune(), 100u);
+    EXPECT_GT(expectAddedToTheTreesValues(&map, u), 100u);
+  }
+}
+
+// Fusion on several threads (each row of 16-cell blocks added by one
+// worker, each block written back by one) against one thread: over a flight's overlapping views, into a map that
 // holds pruned coarse leaves (clamped free and occupied cubes of 64 and 32
 // cells, above the workers' subtrees, which stay on the calling thread), the
-// same tree node for node, the same node count and the same changed blocks
-// and tiles.
+// same tree node for node, the same node count, the same changed blocks
+// and tiles, and the same class changes in the same order.
 TEST(MapAccumulator, ThreadCountsFuseTheSameTree) {
   const FlightScenario scenario = makeScenario("posts");
   const std::vector<GridUpdate> updates = flightUpdates(scenario, {0u, 1u, 30u, 31u, 90u});
@@ -398,11 +552,20 @@ TEST(MapAccumulator, ThreadCountsFuseTheSameTree) {
     c.threads = threads;
     auto map = std::make_unique<MapAccumulator>(c);
     map->load(path);
+    map->recordClassChanges(true);
     bool all = false;
     map->takeChangedBlocks(&all);
     map->takeDirtyTiles();
+    map->takeClassChanges(&all);
     for (const GridUpdate& u : updates) {
       EXPECT_TRUE(map->integrate(u));
+      // The class changes, in their order: each as a block index of its own.
+      const std::vector<CellClassChange> changes = map->takeClassChanges(&all);
+      EXPECT_FALSE(all);
+      EXPECT_GT(changes.size(), 1000u);
+      changed->emplace_back();
+      for (const CellClassChange& change : changes)
+        changed->back().push_back(change.cell * 4 + Eigen::Vector3i::Constant(static_cast<int>(change.now)));
       changed->push_back(map->takeChangedBlocks(&all));
       std::sort(changed->back().begin(), changed->back().end(), [](const auto& a, const auto& b) {
         return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
