@@ -49,10 +49,12 @@ void integrateTable1Image(DrawingAlgorithm algorithm, MapAccumulator* map) {
   ASSERT_TRUE(map->integrate(update));
 }
 
-/// The updates of @p frames of @p scenario, drawn with line_pyramid.
-std::vector<GridUpdate> flightUpdates(const FlightScenario& scenario, std::initializer_list<size_t> frames) {
+/// The updates of @p frames of @p scenario, drawn with line_pyramid at @p resolution_m.
+std::vector<GridUpdate> flightUpdates(const FlightScenario& scenario, const std::vector<size_t>& frames,
+                                      double resolution_m = 0.25) {
   DrawingConfig drawing;
   drawing.algorithm = DrawingAlgorithm::kLinePyramid;
+  drawing.resolution_m = resolution_m;
   DisparityDrawer drawer(scenario.camera, drawing);
   std::vector<GridUpdate> updates;
   for (size_t frame : frames) {
@@ -63,6 +65,20 @@ std::vector<GridUpdate> flightUpdates(const FlightScenario& scenario, std::initi
     encodeGridUpdate(grid, T.translation(), &updates.back());
   }
   return updates;
+}
+
+/// Sets every cell of the key-aligned cube of @p edge cells that holds
+/// @p W_near in @p tree to @p log_odds; returns the cube's first global cell.
+Eigen::Vector3i setCube(octomap::OcTree* tree, int edge, const Eigen::Vector3d& W_near, float log_odds) {
+  const int offset = static_cast<int>(tree->coordToKey(0.0));
+  const Eigen::Vector3i first = (W_near / (tree->getResolution() * edge)).array().floor().cast<int>() * edge;
+  for (int z = 0; z < edge; ++z)
+    for (int y = 0; y < edge; ++y)
+      for (int x = 0; x < edge; ++x) {
+        const Eigen::Vector3i g = first + Eigen::Vector3i(x, y, z);
+        tree->setNodeValue(octomap::OcTreeKey(g.x() + offset, g.y() + offset, g.z() + offset), log_odds);
+      }
+  return first;
 }
 }  // namespace
 
@@ -333,10 +349,6 @@ TEST(MapAccumulator, KillDuringSaveLeavesThePreviousMapIntact) {
 // storage order: the same tree, node for node.
 TEST(MapAccumulator, IntegrateEqualsUpdateNodeOverAFlight) {
   const FlightScenario scenario = makeScenario("posts");
-  DrawingConfig drawing;
-  drawing.algorithm = DrawingAlgorithm::kLinePyramid;
-  drawing.resolution_m = 0.5;
-  DisparityDrawer drawer(scenario.camera, drawing);
   MapAccumulatorConfig cfg;
   cfg.resolution_m = 0.5;
   MapAccumulator map(cfg);
@@ -345,12 +357,7 @@ TEST(MapAccumulator, IntegrateEqualsUpdateNodeOverAFlight) {
   plain.setClampingThresMax(cfg.clamping_max_prob);
   plain.setOccupancyThres(cfg.occupancy_threshold_prob);
   const int offset = static_cast<int>(plain.coordToKey(0.0));
-  for (size_t frame : {0u, 30u, 31u, 90u, 150u}) {
-    const Eigen::Isometry3d T = scenario.cameraPose(frame);
-    LocalGrid grid;
-    drawer.draw(renderStereoFrame(scenario, frame, 1), T, &grid);
-    GridUpdate update;
-    encodeGridUpdate(grid, T.translation(), &update);
+  for (const GridUpdate& update : flightUpdates(scenario, {0u, 30u, 31u, 90u, 150u}, cfg.resolution_m)) {
     ASSERT_GT(update.numCells(), 1000u);
     ASSERT_TRUE(map.integrate(update));
     update.forEachCell([&](const Eigen::Vector3i& g, float v) {
@@ -374,12 +381,9 @@ TEST(MapAccumulator, TheCachedFusionIsUpdateNodesTreeWhenRead) {
   std::vector<size_t> frames;
   for (size_t k = 0; k < 25; ++k) frames.push_back(k);
   frames.push_back(90);
-  DrawingConfig drawing;
-  drawing.algorithm = DrawingAlgorithm::kLinePyramid;
-  drawing.resolution_m = 0.5;
-  DisparityDrawer drawer(scenario.camera, drawing);
   MapAccumulatorConfig cfg;
   cfg.resolution_m = 0.5;
+  const std::vector<GridUpdate> updates = flightUpdates(scenario, frames, cfg.resolution_m);
   // Clamped cubes ahead of the first camera, each one pruned leaf: free ones
   // (the views' free rays end in them), an occupied one on the ground, and a
   // free one high above, which the views' free space only confirms.
@@ -387,15 +391,7 @@ TEST(MapAccumulator, TheCachedFusionIsUpdateNodesTreeWhenRead) {
   cubes.setClampingThresMin(cfg.clamping_min_prob);
   cubes.setClampingThresMax(cfg.clamping_max_prob);
   const int offset = static_cast<int>(cubes.coordToKey(0.0));
-  auto cube = [&](int edge, const Eigen::Vector3d& W_near, float log_odds) {
-    const Eigen::Vector3i first = (W_near / (cfg.resolution_m * edge)).array().floor().cast<int>() * edge;
-    for (int z = 0; z < edge; ++z)
-      for (int y = 0; y < edge; ++y)
-        for (int x = 0; x < edge; ++x) {
-          const Eigen::Vector3i g = first + Eigen::Vector3i(x, y, z);
-          cubes.setNodeValue(octomap::OcTreeKey(g.x() + offset, g.y() + offset, g.z() + offset), log_odds);
-        }
-  };
+  auto cube = [&](int edge, const Eigen::Vector3d& W_near, float log_odds) { setCube(&cubes, edge, W_near, log_odds); };
   const float free_log_odds = static_cast<float>(logit(cfg.clamping_min_prob));
   const float occupied_log_odds = static_cast<float>(logit(cfg.clamping_max_prob));
   const Eigen::Isometry3d T0 = scenario.cameraPose(0);
@@ -416,18 +412,14 @@ TEST(MapAccumulator, TheCachedFusionIsUpdateNodesTreeWhenRead) {
   plain->setClampingThresMin(cfg.clamping_min_prob);
   plain->setClampingThresMax(cfg.clamping_max_prob);
   plain->setOccupancyThres(cfg.occupancy_threshold_prob);
-  for (size_t i = 0; i < frames.size(); ++i) {
-    const Eigen::Isometry3d T = scenario.cameraPose(frames[i]);
-    LocalGrid grid;
-    drawer.draw(renderStereoFrame(scenario, frames[i], 1), T, &grid);
-    GridUpdate update;
-    encodeGridUpdate(grid, T.translation(), &update);
+  for (size_t i = 0; i < updates.size(); ++i) {
+    const GridUpdate& update = updates[i];
     ASSERT_GT(update.numCells(), 1000u);
     ASSERT_TRUE(map.integrate(update));
     update.forEachCell([&](const Eigen::Vector3i& g, float v) {
       plain->updateNode(octomap::OcTreeKey(g.x() + offset, g.y() + offset, g.z() + offset), v, true);
     });
-    if (i == 5 || i == 17 || i + 1 == frames.size()) {
+    if (i == 5 || i == 17 || i + 1 == updates.size()) {
       plain->updateInnerOccupancy();
       ASSERT_EQ(map.tree().size(), plain->size()) << "after update " << i + 1;
       ASSERT_EQ(fullTree(map.tree()), fullTree(*plain)) << "after update " << i + 1;
@@ -529,16 +521,7 @@ TEST(MapAccumulator, ThreadCountsFuseTheSameTree) {
   MapAccumulatorConfig cfg;
   octomap::OcTree cubes(cfg.resolution_m);
   const Eigen::Vector3d ahead = scenario.cameraPose(0) * Eigen::Vector3d(0.0, 0.0, 12.0);
-  const int offset = static_cast<int>(cubes.coordToKey(0.0));
-  auto cube = [&](int edge, const Eigen::Vector3d& W_near, float log_odds) {
-    const Eigen::Vector3i first = (W_near / (cfg.resolution_m * edge)).array().floor().cast<int>() * edge;
-    for (int z = 0; z < edge; ++z)
-      for (int y = 0; y < edge; ++y)
-        for (int x = 0; x < edge; ++x) {
-          const Eigen::Vector3i g = first + Eigen::Vector3i(x, y, z);
-          cubes.setNodeValue(octomap::OcTreeKey(g.x() + offset, g.y() + offset, g.z() + offset), log_odds);
-        }
-  };
+  auto cube = [&](int edge, const Eigen::Vector3d& W_near, float log_odds) { setCube(&cubes, edge, W_near, log_odds); };
   cube(64, ahead, static_cast<float>(logit(cfg.clamping_min_prob)));
   cube(32, ahead + Eigen::Vector3d(0.0, 0.0, -8.0), static_cast<float>(logit(cfg.clamping_max_prob)));
   cubes.updateInnerOccupancy();
@@ -756,18 +739,10 @@ TEST(MapAccumulator, RecordsTheCellsWhoseClassAnUpdateChanged) {
   const std::vector<GridUpdate> updates = flightUpdates(scenario, {0u, 1u, 30u});
   MapAccumulatorConfig cfg;
   octomap::OcTree cubes(cfg.resolution_m);
-  const int offset = static_cast<int>(cubes.coordToKey(0.0));
   const Eigen::Vector3d ahead = scenario.cameraPose(0) * Eigen::Vector3d(0.0, 0.0, 12.0);
   std::vector<std::pair<Eigen::Vector3i, int>> cube_boxes;  // first cell, edge
   auto cube = [&](int edge, const Eigen::Vector3d& W_near, float log_odds) {
-    const Eigen::Vector3i first = (W_near / (cfg.resolution_m * edge)).array().floor().cast<int>() * edge;
-    cube_boxes.emplace_back(first, edge);
-    for (int z = 0; z < edge; ++z)
-      for (int y = 0; y < edge; ++y)
-        for (int x = 0; x < edge; ++x) {
-          const Eigen::Vector3i g = first + Eigen::Vector3i(x, y, z);
-          cubes.setNodeValue(octomap::OcTreeKey(g.x() + offset, g.y() + offset, g.z() + offset), log_odds);
-        }
+    cube_boxes.emplace_back(setCube(&cubes, edge, W_near, log_odds), edge);
   };
   auto inCube = [&](const Eigen::Vector3i& g) {
     for (const auto& c : cube_boxes)
