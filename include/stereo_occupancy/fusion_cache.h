@@ -117,6 +117,7 @@ class FusionCache {
   std::mutex blocks_mutex_;                                      ///< blocks_ while add()'s workers look up blocks
   std::vector<std::unique_ptr<RowOutput>> rows_;                 ///< add()'s rows of blocks
   std::vector<size_t> value_start_;                              ///< add()'s first value of each run
+  std::vector<int64_t> row_ids_;                                 ///< add()'s rows of blocks that hold cells
   /// writeBack()'s parts, kept from call to call for their memory.
   std::vector<std::vector<AccumulatingOcTree::SiblingBlock>> parts_;
   std::vector<Block*> due_;         ///< writeBack()'s blocks

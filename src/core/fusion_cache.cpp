@@ -10,6 +10,9 @@ namespace {
 
 constexpr int kEdgeBits = 16 - AccumulatingOcTree::kPartDepth;
 constexpr float kNoLeaf = std::numeric_limits<float>::quiet_NaN();
+/// add()'s row outputs kept beyond an update's: more than kKeptRowsFactor
+/// times its rows and kKeptRows are let go.
+constexpr size_t kKeptRowsFactor = 4, kKeptRows = 256;
 
 /// A block's key in the map: its lowest key / kEdge, 16 bits per axis.
 uint64_t blockKey(const octomap::OcTreeKey& first) {
@@ -87,14 +90,33 @@ void FusionCache::add(const GridUpdateView& update, const AccumulatingOcTree& tr
   touched_blocks->clear();
   if (update.run_start.empty()) return;
   // Rows of blocks (a block's edge of y and of z, the whole x range) hold
-  // blocks no other row holds: each is one task, in z then y order, and the
-  // tasks' class changes and blocks follow in that order whatever the threads.
+  // blocks no other row holds: each row that holds a cell is one task, in z
+  // then y order, and the tasks' class changes and blocks follow in that
+  // order whatever the threads. The rows come from the runs, so work and
+  // memory follow the cells carried, not the box claimed.
   const Eigen::Vector3i key_first = update.origin_index + Eigen::Vector3i::Constant(key_offset);
   const Eigen::Vector3i key_last = key_first + update.size - Eigen::Vector3i::Ones();
   const int by0 = key_first.y() >> kEdgeBits, bz0 = key_first.z() >> kEdgeBits;
-  const int rows_y = (key_last.y() >> kEdgeBits) - by0 + 1, rows_z = (key_last.z() >> kEdgeBits) - bz0 + 1;
-  const size_t rows = static_cast<size_t>(rows_y) * static_cast<size_t>(rows_z);
+  const int64_t rows_y = (key_last.y() >> kEdgeBits) - by0 + 1;
+  const int64_t nx = update.size.x(), ny = update.size.y();
+  row_ids_.clear();
+  for (size_t r = 0; r < update.run_start.size(); ++r) {
+    // The grid rows (y, z) the run covers, each once.
+    const int64_t first_row = update.run_start[r] / nx;
+    const int64_t last_row = (int64_t{update.run_start[r]} + update.run_length[r] - 1) / nx;
+    for (int64_t row = first_row; row <= last_row; ++row) {
+      const int64_t by = ((row % ny + key_first.y()) >> kEdgeBits) - by0;
+      const int64_t bz = ((row / ny + key_first.z()) >> kEdgeBits) - bz0;
+      const int64_t id = bz * rows_y + by;
+      if (row_ids_.empty() || row_ids_.back() != id) row_ids_.push_back(id);
+    }
+  }
+  std::sort(row_ids_.begin(), row_ids_.end());
+  row_ids_.erase(std::unique(row_ids_.begin(), row_ids_.end()), row_ids_.end());
+  const size_t rows = row_ids_.size();
   if (rows_.size() < rows) rows_.resize(rows);
+  // A rare update with many more rows than the next leaves their memory behind: let it go.
+  if (rows_.size() > kKeptRowsFactor * rows + kKeptRows) rows_.resize(rows);
   for (size_t r = 0; r < rows; ++r) {
     if (!rows_[r]) rows_[r] = std::make_unique<RowOutput>();
     rows_[r]->changes.clear();
@@ -106,8 +128,8 @@ void FusionCache::add(const GridUpdateView& update, const AccumulatingOcTree& tr
   for (size_t r = 0; r < update.run_start.size(); ++r) value_start_[r + 1] = value_start_[r] + update.run_length[r];
   const size_t max_changes = log ? log->max_changes - std::min(log->max_changes, log->changes.size()) : 0;
   auto addRow = [&](size_t row, unsigned) {
-    const int by = by0 + static_cast<int>(row % static_cast<size_t>(rows_y));
-    const int bz = bz0 + static_cast<int>(row / static_cast<size_t>(rows_y));
+    const int by = by0 + static_cast<int>(row_ids_[row] % rows_y);
+    const int bz = bz0 + static_cast<int>(row_ids_[row] / rows_y);
     // The row's local y and z ranges, inside the update's box.
     const int64_t y0 = std::max(by << kEdgeBits, key_first.y()) - key_first.y();
     const int64_t y1 = std::min((by + 1) << kEdgeBits, key_last.y() + 1) - key_first.y();

@@ -337,6 +337,7 @@ bool MapAccumulator::admits(const GridUpdateView& update, std::string* why) cons
 }
 
 bool MapAccumulator::integrate(const GridUpdateView& update, std::string* why) {
+  static_assert(FusionCache::kEdge == kBlockCells, "the cache's blocks are the change-tracking blocks");
   if (!admits(update, why)) return false;
   // admits() put every cell inside the key range.
   cache_->add(update, *tree_, static_cast<int>(tree_->coordToKey(0.0)), recordingLog(), &touched_blocks_,

@@ -126,6 +126,23 @@ TEST(HostileUpdates, WorkFollowsTheCellsNotTheClaimedBox) {
   EXPECT_EQ(fullTree(map->tree()), before);
 }
 
+// A three-cell update claiming 1 x 46340 x 46340 cells (nearly 2^31, with
+// max_update_cells raised to let it in): the fusion works on the rows of
+// blocks that its cells lie in, not on the box's 8.4 M rows of blocks.
+TEST(HostileUpdates, TheFusionWorksOnTheCellsNotTheClaimedBox) {
+  const Eigen::Vector3i size(1, 46340, 46340);
+  const uint32_t last = static_cast<uint32_t>(uint64_t{46340} * 46340 - 1);
+  const GridUpdate u = claimedBox(Eigen::Vector3i(0, -23170, -23170), size, {0, 70000, last});
+  ASSERT_TRUE(u.isConsistent());
+  EXPECT_TRUE(runsWithin(size_t{64} << 20, [&] {
+    MapAccumulatorConfig config;
+    config.max_update_cells = kIntMax;
+    config.threads = 1;
+    MapAccumulator map(config);
+    return map.integrate(u) && map.tree().getNumLeafNodes() == 3;
+  })) << "fusing three cells needed more than 64 MB, or failed";
+}
+
 // Two cells at the ends of a 2^31 - 1 wide row: no int overflow, and the
 // walk visits exactly two blocks, each with its one cell and nothing else.
 TEST(HostileUpdates, AFullWidthRowDoesNotOverflow) {
