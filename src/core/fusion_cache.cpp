@@ -88,7 +88,7 @@ void FusionCache::add(const GridUpdateView& update, const AccumulatingOcTree& tr
                       std::vector<Eigen::Vector3i>* touched_blocks, WorkerPool* pool) {
   ++updates_;
   touched_blocks->clear();
-  if (update.run_start.empty()) return;
+  if (update.log_odds.empty()) return;  // no cells (an empty box may carry empty runs)
   // Rows of blocks (a block's edge of y and of z, the whole x range) hold
   // blocks no other row holds: each row that holds a cell is one task, in z
   // then y order, and the tasks' class changes and blocks follow in that
@@ -101,6 +101,7 @@ void FusionCache::add(const GridUpdateView& update, const AccumulatingOcTree& tr
   const int64_t nx = update.size.x(), ny = update.size.y();
   row_ids_.clear();
   for (size_t r = 0; r < update.run_start.size(); ++r) {
+    if (update.run_length[r] == 0) continue;
     // The grid rows (y, z) the run covers, each once.
     const int64_t first_row = update.run_start[r] / nx;
     const int64_t last_row = (int64_t{update.run_start[r]} + update.run_length[r] - 1) / nx;

@@ -143,6 +143,29 @@ TEST(HostileUpdates, TheFusionWorksOnTheCellsNotTheClaimedBox) {
   })) << "fusing three cells needed more than 64 MB, or failed";
 }
 
+// Runs of no cells, in a box of no width or after a cell: nothing more to
+// fuse, and no division by the box's width (a fuzzer's find).
+TEST(HostileUpdates, RunsOfNoCellsFuseNothing) {
+  auto map = smallMap();
+  const std::string before = fullTree(map->tree());
+  GridUpdate empty = claimedBox(Eigen::Vector3i(0, 0, 0), Eigen::Vector3i(0, 4, 4), {});
+  empty.run_start.push_back(0);
+  empty.run_length.push_back(0);
+  map->integrate(empty);  // taken or refused: either way nothing changes
+  EXPECT_EQ(fullTree(map->tree()), before);
+  GridUpdate one = claimedBox(Eigen::Vector3i(8, 0, 0), Eigen::Vector3i(4, 4, 4), {0});
+  one.run_start.push_back(5);
+  one.run_length.push_back(0);
+  map->integrate(one);
+  const octomap::OcTreeNode* cell = map->tree().search(octomap::OcTreeKey(32768 + 8, 32768, 32768));
+  if (one.isConsistent()) {
+    ASSERT_NE(cell, nullptr);
+    EXPECT_EQ(map->tree().getNumLeafNodes(), 5u);
+  } else {
+    EXPECT_EQ(fullTree(map->tree()), before);
+  }
+}
+
 // Two cells at the ends of a 2^31 - 1 wide row: no int overflow, and the
 // walk visits exactly two blocks, each with its one cell and nothing else.
 TEST(HostileUpdates, AFullWidthRowDoesNotOverflow) {
