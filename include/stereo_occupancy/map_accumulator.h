@@ -21,6 +21,7 @@ namespace stereo_occupancy {
 
 class AccumulatingOcTree;
 class FusionCache;
+class WorkerPool;
 struct ClassChangeLog;
 
 /// Parameters of the global map.
@@ -236,6 +237,9 @@ class MapAccumulator {
   size_t mergeTileDownTo(const TileIndex& tile, unsigned deepest);
   struct Fusion;  // the workers that write the cache back
   void applyThresholds();
+  /// The fusion's workers and their node counters; null when it runs on the calling thread.
+  WorkerPool* pool() const;
+  std::vector<std::unique_ptr<AccumulatingOcTree>>* counters() const;
   /// The cache's changes into the tree: all of them, or the blocks that the
   /// keys [lo, hi] overlap (what a reader of that box needs).
   void writeBack() const;

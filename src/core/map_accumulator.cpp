@@ -41,9 +41,12 @@ MapAccumulator::MapAccumulator(const MapAccumulatorConfig& config) : config_(con
 
 MapAccumulator::~MapAccumulator() = default;
 
+WorkerPool* MapAccumulator::pool() const { return fusion_ ? &fusion_->pool : nullptr; }
+
+AccumulatingOcTree::WorkerCounters* MapAccumulator::counters() const { return fusion_ ? &fusion_->counters : nullptr; }
+
 void MapAccumulator::writeBack() const {
-  const size_t cells = fusion_ ? cache_->writeBack(tree_.get(), &fusion_->pool, &fusion_->counters)
-                               : cache_->writeBack(tree_.get(), nullptr, nullptr);
+  const size_t cells = cache_->writeBack(tree_.get(), pool(), counters());
   inner_stale_ = inner_stale_ || cells > 0;
 }
 
@@ -340,14 +343,12 @@ bool MapAccumulator::integrate(const GridUpdateView& update, std::string* why) {
   static_assert(FusionCache::kEdge == kBlockCells, "the cache's blocks are the change-tracking blocks");
   if (!admits(update, why)) return false;
   // admits() put every cell inside the key range.
-  cache_->add(update, *tree_, static_cast<int>(tree_->coordToKey(0.0)), recordingLog(), &touched_blocks_,
-              fusion_ ? &fusion_->pool : nullptr);
+  cache_->add(update, *tree_, static_cast<int>(tree_->coordToKey(0.0)), recordingLog(), &touched_blocks_, pool());
   for (const Eigen::Vector3i& b : touched_blocks_) {
     if (!all_changed_) changed_blocks_.insert(packBlock(b));
     dirty_tiles_.insert(packedTileOf(b));
   }
-  const size_t written = fusion_ ? cache_->maintain(tree_.get(), &fusion_->pool, &fusion_->counters)
-                                 : cache_->maintain(tree_.get(), nullptr, nullptr);
+  const size_t written = cache_->maintain(tree_.get(), pool(), counters());
   if (class_log_ && class_log_->overflowed) classesChangedEverywhere();  // too many to keep
   inner_stale_ = inner_stale_ || written > 0;
   if (W_recent_origins_.size() < kPruneOrigins) {
