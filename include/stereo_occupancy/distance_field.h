@@ -175,12 +175,17 @@ class DistanceField {
   /// outside the window costs nothing.
   void update(const octomap::OcTree& map, const std::vector<CellClassChange>& changes,
               const std::vector<CellBox>& regions, bool all, const Eigen::Vector3d& W_vehicle);
-  /// The map as update() gets it: called only when the field reads cells
-  /// (the window placed or moved, regions, all), at most once an update, so
-  /// that the caller makes the map current only then (MapAccumulator's
-  /// cache: MapAccumulator::leafTree()).
-  using MapSource = std::function<const octomap::OcTree&()>;
-  /// update() from @p map, asked only if cells are read (and its resolution checked then).
+  /// The map as update() gets it: called with the box of cells (global
+  /// indices) the field is about to read, whose leaves must then be current,
+  /// so that the caller makes only those current (MapAccumulator's cache:
+  /// MapAccumulator::leafTree(const CellBox&)). Called only when the field
+  /// reads cells (the window placed or moved, regions inside it, all): first
+  /// with an empty box, before the field changes, for the map's resolution
+  /// and threshold; then once per box read (the window when placed, a slab
+  /// per axis when it moves, a region's blocks).
+  using MapSource = std::function<const octomap::OcTree&(const CellBox& cells)>;
+  /// update() from @p map, asked only for the cells read.
+  /// @throws std::invalid_argument if @p map's resolution is not the field's (the field unchanged).
   void update(const MapSource& map, const std::vector<CellClassChange>& changes, const std::vector<CellBox>& regions,
               bool all, const Eigen::Vector3d& W_vehicle);
 
@@ -304,17 +309,18 @@ class DistanceField {
   Eigen::Vector3i wantedOrigin(const Eigen::Vector3d& W_vehicle) const;
   /// @throws std::invalid_argument if @p map's resolution is not the field's.
   void checkResolution(const octomap::OcTree& map) const;
-  /// The window's cells (global indices).
-  CellBox windowCells() const;
-  void moveTo(const octomap::OcTree& map, const Eigen::Vector3i& origin_block);
-  void readAll(const octomap::OcTree& map);
+  /// The window's cells (global indices), and those of a window at @p origin_block.
+  CellBox windowCells() const { return windowCellsAt(origin_block_); }
+  CellBox windowCellsAt(const Eigen::Vector3i& origin_block) const;
+  void moveTo(const MapSource& map, const Eigen::Vector3i& origin_block);
+  void readAll(const MapSource& map);
   /// Reads the local blocks [lo, hi) that entered from @p map and marks them (markEntered()).
-  void readBlocks(const octomap::OcTree& map, const Eigen::Vector3i& lo, const Eigen::Vector3i& hi);
-  /// Sets the local blocks [lo, hi) unknown and reads their classes from @p map.
-  void readClasses(const octomap::OcTree& map, const Eigen::Vector3i& lo, const Eigen::Vector3i& hi);
+  void readBlocks(const MapSource& map, const Eigen::Vector3i& lo, const Eigen::Vector3i& hi);
+  /// Sets the local blocks [lo, hi) unknown and reads their classes from @p map (asked for their cells).
+  void readClasses(const MapSource& map, const Eigen::Vector3i& lo, const Eigen::Vector3i& hi);
   /// Reads the window's blocks that @p cells overlaps from @p map again;
   /// those that held or hold what the outside does not are changed.
-  void readRegion(const octomap::OcTree& map, const CellBox& cells);
+  void readRegion(const MapSource& map, const CellBox& cells);
   /// Marks the blocks [lo, hi) that entered: computed, and the ones that
   /// differ from the outside (differsFromOutside()) changed.
   void markEntered(const Eigen::Vector3i& lo, const Eigen::Vector3i& hi);

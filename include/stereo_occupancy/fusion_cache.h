@@ -79,7 +79,8 @@ class FusionCache {
   /// null: this thread), then lets go of the idle blocks. Returns the cells written.
   size_t writeBack(AccumulatingOcTree* tree, WorkerPool* pool, AccumulatingOcTree::WorkerCounters* counters);
   /// The same for the blocks that the keys [@p lo, @p hi] overlap only; none let go.
-  size_t writeBack(AccumulatingOcTree* tree, const octomap::OcTreeKey& lo, const octomap::OcTreeKey& hi);
+  size_t writeBack(AccumulatingOcTree* tree, const octomap::OcTreeKey& lo, const octomap::OcTreeKey& hi,
+                   WorkerPool* pool = nullptr, AccumulatingOcTree::WorkerCounters* counters = nullptr);
   /// After add(): the write-backs due (kMaxUnwrittenUpdates), and the idle
   /// blocks let go; everything when the blocks exceed kMaxBlocks. Returns the cells written.
   size_t maintain(AccumulatingOcTree* tree, WorkerPool* pool, AccumulatingOcTree::WorkerCounters* counters);

@@ -86,6 +86,11 @@ class MapAccumulator {
   /// For readers of leaves only (the distance field), so that they do not
   /// pay that pass after every update. The cache is written back first.
   const octomap::OcTree& leafTree() const;
+  /// The same with the leaves current inside @p cells (global cell indices,
+  /// CellClassChange's) only: the cache's blocks that overlap the box are
+  /// written back, the others stay (an empty box: none). For a reader of one
+  /// part of the map (the distance field's entering slabs).
+  const octomap::OcTree& leafTree(const CellBox& cells) const;
 
   /// True if integrate() would take @p update: consistent (GridUpdateView::isConsistent),
   /// of the map's resolution, a box of at most max_update_cells cells that lies

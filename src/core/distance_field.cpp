@@ -173,7 +173,7 @@ Eigen::Vector3i DistanceField::blockOfLinear(int linear) const {
 void DistanceField::update(const octomap::OcTree& map, const std::vector<CellClassChange>& changes,
                            const std::vector<CellBox>& regions, bool all, const Eigen::Vector3d& W_vehicle) {
   checkResolution(map);
-  update([&map]() -> const octomap::OcTree& { return map; }, changes, regions, all, W_vehicle);
+  update([&map](const CellBox&) -> const octomap::OcTree& { return map; }, changes, regions, all, W_vehicle);
 }
 
 void DistanceField::checkResolution(const octomap::OcTree& map) const {
@@ -184,31 +184,39 @@ void DistanceField::checkResolution(const octomap::OcTree& map) const {
 
 void DistanceField::update(const MapSource& source, const std::vector<CellClassChange>& changes,
                            const std::vector<CellBox>& regions, bool all, const Eigen::Vector3d& W_vehicle) {
-  const octomap::OcTree* read_from = nullptr;
-  auto map = [&]() -> const octomap::OcTree& {
-    if (read_from) return *read_from;
-    read_from = &source();
-    checkResolution(*read_from);
-    occupied_log_odds_ = read_from->getOccupancyThresLog();
-    return *read_from;
+  bool checked = false;
+  const MapSource map = [&](const CellBox& cells) -> const octomap::OcTree& {
+    const octomap::OcTree& tree = source(cells);
+    if (!checked) {
+      checkResolution(tree);
+      occupied_log_odds_ = tree.getOccupancyThresLog();
+      checked = true;
+    }
+    return tree;
   };
+  const Eigen::Vector3i origin = W_vehicle.allFinite() ? wantedOrigin(W_vehicle) : origin_block_;
+  const bool read_all = !placed_ || all || ((origin - origin_block_).array().abs() >= size_blocks_.array()).any();
+  const CellBox window_cells = windowCellsAt(origin);
+  const bool reads = read_all || origin != origin_block_ ||
+                     std::any_of(regions.begin(), regions.end(),
+                                 [&](const CellBox& region) { return !region.intersection(window_cells).isEmpty(); });
+  if (reads) map(CellBox());  // the map's resolution checked before anything changes
   ++epoch_;
   everything_ = false;
   last_read_cells_ = 0;
   for (auto* list : {&changed_, &blocks_x_, &blocks_y_, &blocks_z_}) list->clear();
-  const Eigen::Vector3i origin = W_vehicle.allFinite() ? wantedOrigin(W_vehicle) : origin_block_;
-  if (!placed_ || all || ((origin - origin_block_).array().abs() >= size_blocks_.array()).any()) {
+  if (read_all) {
     // First, a jump beyond the window, or a map changed everywhere: read it all.
     origin_block_ = origin;
     for (int a = 0; a < 3; ++a) ring_phase_[a] = positiveMod(origin_block_[a], size_blocks_[a]);
-    readAll(map());
+    readAll(map);
     placed_ = true;
   } else {
-    if (origin != origin_block_) moveTo(map(), origin);
+    if (origin != origin_block_) moveTo(map, origin);
     applyChanges(changes);
     // After the changes: the map's cells in the regions are the newer word.
     for (const CellBox& region : regions)
-      if (!region.intersection(windowCells()).isEmpty()) readRegion(map(), region);
+      if (!region.intersection(windowCells()).isEmpty()) readRegion(map, region);
   }
   recompute();
 }
@@ -229,7 +237,7 @@ Eigen::Vector3i DistanceField::wantedOrigin(const Eigen::Vector3d& W_vehicle) co
   return origin;
 }
 
-void DistanceField::moveTo(const octomap::OcTree& map, const Eigen::Vector3i& origin_block) {
+void DistanceField::moveTo(const MapSource& map, const Eigen::Vector3i& origin_block) {
   const Eigen::Vector3i old_origin = origin_block_;
   const Eigen::Vector3i shift = origin_block - old_origin;
   // The cells within reach of the side that leaves: their nearest obstacle
@@ -301,23 +309,23 @@ bool DistanceField::differsFromOutside(size_t slot) const {
   return false;
 }
 
-void DistanceField::readAll(const octomap::OcTree& map) {
+void DistanceField::readAll(const MapSource& map) {
   everything_ = true;
   readClasses(map, Eigen::Vector3i::Zero(), size_blocks_);
 }
 
-void DistanceField::readBlocks(const octomap::OcTree& map, const Eigen::Vector3i& lo, const Eigen::Vector3i& hi) {
+void DistanceField::readBlocks(const MapSource& map, const Eigen::Vector3i& lo, const Eigen::Vector3i& hi) {
   if ((hi.array() <= lo.array()).any()) return;
   readClasses(map, lo, hi);
   markEntered(lo, hi);
 }
 
-CellBox DistanceField::windowCells() const {
-  const Eigen::Vector3i origin_cell = origin_block_ * kBlockCells;
+CellBox DistanceField::windowCellsAt(const Eigen::Vector3i& origin_block) const {
+  const Eigen::Vector3i origin_cell = origin_block * kBlockCells;
   return CellBox(origin_cell, origin_cell + size_cells_ - Eigen::Vector3i::Ones());
 }
 
-void DistanceField::readRegion(const octomap::OcTree& map, const CellBox& cells) {
+void DistanceField::readRegion(const MapSource& map, const CellBox& cells) {
   const Eigen::Vector3i origin_cell = origin_block_ * kBlockCells;
   const CellBox in_window = cells.intersection(windowCells());
   if (in_window.isEmpty()) return;
@@ -343,7 +351,7 @@ void DistanceField::readRegion(const octomap::OcTree& map, const CellBox& cells)
       }
 }
 
-void DistanceField::readClasses(const octomap::OcTree& map, const Eigen::Vector3i& lo, const Eigen::Vector3i& hi) {
+void DistanceField::readClasses(const MapSource& source, const Eigen::Vector3i& lo, const Eigen::Vector3i& hi) {
   if ((hi.array() <= lo.array()).any()) return;
   last_read_cells_ += static_cast<size_t>((hi - lo).prod()) * kBlockVolume;
   for (int z = lo.z(); z < hi.z(); ++z)
@@ -362,6 +370,7 @@ void DistanceField::readClasses(const octomap::OcTree& map, const Eigen::Vector3
     key_lo[a] = static_cast<octomap::key_type>(std::max(k_lo, 0));
     key_hi[a] = static_cast<octomap::key_type>(std::min(k_hi, kKeyMax));
   }
+  const octomap::OcTree& map = source(CellBox(g_lo, g_hi));
   const unsigned depth = map.getTreeDepth();
   for (auto it = map.begin_leafs_bbx(key_lo, key_hi), end = map.end_leafs_bbx(); it != end; ++it) {
     if (!leafOverlaps(it, depth, key_lo, key_hi)) continue;  // octomap 1.9 hands out some just outside

@@ -334,8 +334,9 @@ bool overlaps(const FusionCache::Block& b, const octomap::OcTreeKey& lo, const o
 }
 }  // namespace
 
-size_t FusionCache::writeBack(AccumulatingOcTree* tree, const octomap::OcTreeKey& lo, const octomap::OcTreeKey& hi) {
-  return writeBackIf(tree, nullptr, nullptr, [&](const Block& b) { return overlaps(b, lo, hi); });
+size_t FusionCache::writeBack(AccumulatingOcTree* tree, const octomap::OcTreeKey& lo, const octomap::OcTreeKey& hi,
+                              WorkerPool* pool, AccumulatingOcTree::WorkerCounters* counters) {
+  return writeBackIf(tree, pool, counters, [&](const Block& b) { return overlaps(b, lo, hi); });
 }
 
 size_t FusionCache::maintain(AccumulatingOcTree* tree, WorkerPool* pool, AccumulatingOcTree::WorkerCounters* counters) {

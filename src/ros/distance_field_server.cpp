@@ -268,10 +268,10 @@ void DistanceFieldServer::update() {
   const MapAccumulator& map = fusion_->map();
   field_->write([&](DistanceField& field, DistanceFieldInfo& info) {
     // The leaves only: the inner nodes' pass over the whole tree waits for
-    // the outputs that read them; and only when the field reads cells, as
-    // the fusion's cache is written back for them.
-    field.update([&map]() -> const octomap::OcTree& { return map.leafTree(); }, changes, regions, all,
-                 fusion_->lastSensorOrigin());
+    // the outputs that read them; and only the cells the field reads, as
+    // the fusion's cache is written back for them (a move: the entering slabs).
+    field.update([&map](const CellBox& cells) -> const octomap::OcTree& { return map.leafTree(cells); }, changes,
+                 regions, all, fusion_->lastSensorOrigin());
     info.frame_id = fusion_->frameId();
     info.stamp = fusion_->lastStamp();
     ++info.updates;

@@ -41,15 +41,18 @@ struct FieldScene {
     bool all = false;
     std::vector<CellBox> regions;
     const std::vector<CellClassChange> changes = map.takeClassChanges(&all, &regions);
-    // As the ROS glue does: the map made current only when the field reads it.
+    // As the ROS glue does: the map made current only where the field reads it.
+    read_boxes.clear();
     field.update(
-        [this]() -> const octomap::OcTree& {
-          ++map_reads;
-          return map.leafTree();
+        [this](const CellBox& cells) -> const octomap::OcTree& {
+          if (!cells.isEmpty()) read_boxes.push_back(cells);
+          return map.leafTree(cells);
         },
         changes, regions, all, W_vehicle);
+    map_reads += !read_boxes.empty();
   }
-  size_t map_reads = 0;  ///< the updates that read the map
+  size_t map_reads = 0;             ///< the updates that read cells of the map
+  std::vector<CellBox> read_boxes;  ///< the boxes of cells the last update read
   MapAccumulator map;
   DistanceField field;
 };

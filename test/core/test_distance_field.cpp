@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "distance_field_scene.h"
+#include "single_cell.h"
 #include "stereo_occupancy/distance_field.h"
 
 using namespace stereo_occupancy;
@@ -312,6 +313,46 @@ TEST(DistanceField, WorkFollowsTheChanges) {
   ASSERT_TRUE(scene.integrate(one, W_vehicle + Eigen::Vector3d(8.0, 0.0, 0.0)));  // the window moves
   EXPECT_EQ(scene.map_reads, 2u);
   EXPECT_EQ(scene.field.sample(Eigen::Vector3d(4.5, 4.5, 4.5) * kRes).distance_m, 0.0f);
+}
+
+/// The window's cells (global indices) from its box in metres.
+CellBox windowCellsOf(const DistanceField& field) {
+  const Eigen::AlignedBox3d w = field.window();
+  return CellBox((w.min() / kRes).array().round().cast<int>().matrix(),
+                 (w.max() / kRes).array().round().cast<int>().matrix() - Eigen::Vector3i::Ones());
+}
+
+// A move reads the slab that enters, and only its cells are made current:
+// the fusion's cache holds the rest of its changes back.
+TEST(DistanceField, AMoveReadsOnlyTheSlabThatEnters) {
+  FieldScene scene(smallWindow(false));
+  const Eigen::Vector3d W_vehicle(0.1, 0.1, 0.1);
+  ASSERT_TRUE(scene.integrate(singleCell(Eigen::Vector3i(-10, -10, 2), 2.0f), W_vehicle));
+  const CellBox before = windowCellsOf(scene.field);
+  ASSERT_EQ(scene.read_boxes.size(), 1u);  // placed: the window
+  EXPECT_TRUE(scene.read_boxes[0].isApprox(before));
+  // New obstacles: one inside both windows, one in the slab that enters, one above the windows.
+  const Eigen::Vector3i inside = before.center(), entering(before.max().x() + 3, before.center().y(), 0);
+  const Eigen::Vector3i above = inside + Eigen::Vector3i(0, 0, 40);
+  ASSERT_TRUE(scene.map.integrate(singleCell(above, 2.0f)));
+  ASSERT_TRUE(scene.map.integrate(singleCell(inside, 2.0f)));
+  ASSERT_TRUE(scene.map.integrate(singleCell(entering, 2.0f)));
+  scene.refresh(W_vehicle + Eigen::Vector3d(4.0, 0.0, 0.0));  // two blocks along x
+  const CellBox after = windowCellsOf(scene.field);
+  ASSERT_EQ(after.min(), before.min() + Eigen::Vector3i(16, 0, 0));
+  ASSERT_EQ(scene.read_boxes.size(), 1u);
+  EXPECT_EQ(scene.read_boxes[0].min(), Eigen::Vector3i(before.max().x() + 1, after.min().y(), after.min().z()));
+  EXPECT_EQ(scene.read_boxes[0].max(), after.max());
+  // The slab's cell was written back for the field to read; the others wait in the cache.
+  const octomap::OcTree& as_is = scene.map.leafTree(CellBox());
+  EXPECT_EQ(classInTree(as_is, entering), CellClass::kOccupied);
+  EXPECT_EQ(classInTree(as_is, inside), CellClass::kUnknown);
+  EXPECT_EQ(classInTree(as_is, above), CellClass::kUnknown);
+  // The field has both (the inner one from the fusion's class changes), as the whole map has.
+  EXPECT_EQ(scene.field.sample((entering.cast<double>().array() + 0.5).matrix() * kRes).distance_m, 0.0f);
+  EXPECT_EQ(scene.field.sample((inside.cast<double>().array() + 0.5).matrix() * kRes).distance_m, 0.0f);
+  EXPECT_TRUE(matchesBruteForce(scene));
+  EXPECT_EQ(classInTree(scene.map.leafTree(CellBox()), inside), CellClass::kOccupied);  // written back by tree()
 }
 
 // What changes the map besides the updates comes as regions: a prune far
@@ -695,6 +736,14 @@ TEST(DistanceField, RefusesBadInput) {
   refused([&] { DistanceField(huge, 0.05); }, "cells");
   DistanceField other(smallWindow(false), 0.5);
   refused([&] { other.update(o.scene.map.tree(), {}, true, V::Zero()); }, "resolution");
+  // Through a map source: refused before the field changes (a jump would have moved the window).
+  other.update(octomap::OcTree(0.5), {}, true, V::Zero());
+  const Eigen::AlignedBox3d window = other.window();
+  const DistanceField::MapSource source = [&](const CellBox&) -> const octomap::OcTree& {
+    return o.scene.map.leafTree();
+  };
+  refused([&] { other.update(source, {}, {}, false, V(100.0, 0.0, 0.0)); }, "resolution");
+  EXPECT_TRUE(other.window().isApprox(window));
 }
 
 // The slice: the layer's known cells with their distances; none outside the window.
