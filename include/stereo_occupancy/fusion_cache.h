@@ -72,8 +72,12 @@ class FusionCache {
   /// in, once each.
   /// On @p pool's workers (null: this thread), the same blocks and values,
   /// and the same class changes and touched blocks in the same order, for any number.
-  void add(const GridUpdateView& update, const AccumulatingOcTree& tree, int key_offset, ClassChangeLog* log,
-           std::vector<Eigen::Vector3i>* touched_blocks, WorkerPool* pool = nullptr);
+  /// The blocks stay within kMaxBlocks (or one row of blocks of the update,
+  /// if more): before a row that might pass it, every block is written into
+  /// @p tree and let go. Returns the cells so written (usually none).
+  size_t add(const GridUpdateView& update, AccumulatingOcTree* tree, int key_offset, ClassChangeLog* log,
+             std::vector<Eigen::Vector3i>* touched_blocks, WorkerPool* pool = nullptr,
+             AccumulatingOcTree::WorkerCounters* counters = nullptr);
 
   /// Writes every block's changed cells into @p tree (on @p pool's workers,
   /// null: this thread), then lets go of the idle blocks. Returns the cells written.
@@ -118,7 +122,11 @@ class FusionCache {
   std::mutex blocks_mutex_;                                      ///< blocks_ while add()'s workers look up blocks
   std::vector<std::unique_ptr<RowOutput>> rows_;                 ///< add()'s rows of blocks
   std::vector<size_t> value_start_;                              ///< add()'s first value of each run
-  std::vector<int64_t> row_ids_;                                 ///< add()'s rows of blocks that hold cells
+  /// A row of blocks that holds cells: its id (z then y) and the cells in it.
+  struct RowOfBlocks {
+    int64_t id, cells;
+  };
+  std::vector<RowOfBlocks> rows_of_blocks_;  ///< add()'s
   /// writeBack()'s parts, kept from call to call for their memory.
   std::vector<std::vector<AccumulatingOcTree::SiblingBlock>> parts_;
   std::vector<Block*> due_;         ///< writeBack()'s blocks

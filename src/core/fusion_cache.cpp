@@ -84,11 +84,12 @@ struct FusionCache::RowOutput {
 FusionCache::FusionCache() = default;
 FusionCache::~FusionCache() = default;
 
-void FusionCache::add(const GridUpdateView& update, const AccumulatingOcTree& tree, int key_offset, ClassChangeLog* log,
-                      std::vector<Eigen::Vector3i>* touched_blocks, WorkerPool* pool) {
+size_t FusionCache::add(const GridUpdateView& update, AccumulatingOcTree* tree, int key_offset, ClassChangeLog* log,
+                        std::vector<Eigen::Vector3i>* touched_blocks, WorkerPool* pool,
+                        AccumulatingOcTree::WorkerCounters* counters) {
   ++updates_;
   touched_blocks->clear();
-  if (update.log_odds.empty()) return;  // no cells (an empty box may carry empty runs)
+  if (update.log_odds.empty()) return 0;  // no cells (an empty box may carry empty runs)
   // Rows of blocks (a block's edge of y and of z, the whole x range) hold
   // blocks no other row holds: each row that holds a cell is one task, in z
   // then y order, and the tasks' class changes and blocks follow in that
@@ -99,22 +100,33 @@ void FusionCache::add(const GridUpdateView& update, const AccumulatingOcTree& tr
   const int by0 = key_first.y() >> kEdgeBits, bz0 = key_first.z() >> kEdgeBits;
   const int64_t rows_y = (key_last.y() >> kEdgeBits) - by0 + 1;
   const int64_t nx = update.size.x(), ny = update.size.y();
-  row_ids_.clear();
+  const int64_t blocks_x = (key_last.x() >> kEdgeBits) - (key_first.x() >> kEdgeBits) + 1;
+  rows_of_blocks_.clear();
   for (size_t r = 0; r < update.run_start.size(); ++r) {
     if (update.run_length[r] == 0) continue;
-    // The grid rows (y, z) the run covers, each once.
-    const int64_t first_row = update.run_start[r] / nx;
-    const int64_t last_row = (int64_t{update.run_start[r]} + update.run_length[r] - 1) / nx;
-    for (int64_t row = first_row; row <= last_row; ++row) {
+    // The grid rows (y, z) the run covers, each once, with its cells in each.
+    const int64_t run_first = update.run_start[r], run_end = run_first + update.run_length[r];
+    for (int64_t row = run_first / nx; row <= (run_end - 1) / nx; ++row) {
       const int64_t by = ((row % ny + key_first.y()) >> kEdgeBits) - by0;
       const int64_t bz = ((row / ny + key_first.z()) >> kEdgeBits) - bz0;
       const int64_t id = bz * rows_y + by;
-      if (row_ids_.empty() || row_ids_.back() != id) row_ids_.push_back(id);
+      const int64_t cells = std::min(run_end, (row + 1) * nx) - std::max(run_first, row * nx);
+      if (rows_of_blocks_.empty() || rows_of_blocks_.back().id != id)
+        rows_of_blocks_.push_back(RowOfBlocks{id, cells});
+      else
+        rows_of_blocks_.back().cells += cells;
     }
   }
-  std::sort(row_ids_.begin(), row_ids_.end());
-  row_ids_.erase(std::unique(row_ids_.begin(), row_ids_.end()), row_ids_.end());
-  const size_t rows = row_ids_.size();
+  std::sort(rows_of_blocks_.begin(), rows_of_blocks_.end(),
+            [](const RowOfBlocks& a, const RowOfBlocks& b) { return a.id < b.id; });
+  size_t rows = 0;  // equal ids merged
+  for (const RowOfBlocks& row : rows_of_blocks_) {
+    if (rows > 0 && rows_of_blocks_[rows - 1].id == row.id)
+      rows_of_blocks_[rows - 1].cells += row.cells;
+    else
+      rows_of_blocks_[rows++] = row;
+  }
+  rows_of_blocks_.resize(rows);
   if (rows_.size() < rows) rows_.resize(rows);
   // A rare update with many more rows than the next leaves their memory behind: let it go.
   if (rows_.size() > kKeptRowsFactor * rows + kKeptRows) rows_.resize(rows);
@@ -129,19 +141,37 @@ void FusionCache::add(const GridUpdateView& update, const AccumulatingOcTree& tr
   for (size_t r = 0; r < update.run_start.size(); ++r) value_start_[r + 1] = value_start_[r] + update.run_length[r];
   const size_t max_changes = log ? log->max_changes - std::min(log->max_changes, log->changes.size()) : 0;
   auto addRow = [&](size_t row, unsigned) {
-    const int by = by0 + static_cast<int>(row_ids_[row] % rows_y);
-    const int bz = bz0 + static_cast<int>(row_ids_[row] / rows_y);
+    const int by = by0 + static_cast<int>(rows_of_blocks_[row].id % rows_y);
+    const int bz = bz0 + static_cast<int>(rows_of_blocks_[row].id / rows_y);
     // The row's local y and z ranges, inside the update's box.
     const int64_t y0 = std::max(by << kEdgeBits, key_first.y()) - key_first.y();
     const int64_t y1 = std::min((by + 1) << kEdgeBits, key_last.y() + 1) - key_first.y();
     const int64_t z0 = std::max(bz << kEdgeBits, key_first.z()) - key_first.z();
     const int64_t z1 = std::min((bz + 1) << kEdgeBits, key_last.z() + 1) - key_first.z();
-    addRowOfBlocks(update, tree, key_offset, y0, y1, z0, z1, log != nullptr, max_changes, rows_[row].get());
+    addRowOfBlocks(update, *tree, key_offset, y0, y1, z0, z1, log != nullptr, max_changes, rows_[row].get());
   };
-  if (pool && rows > 1)
-    pool->run(rows, addRow);
-  else
-    for (size_t r = 0; r < rows; ++r) addRow(r, 0);
+  // The most blocks a row can add: one per cell, one per block along x.
+  auto newBlocksAtMost = [&](size_t row) {
+    return static_cast<size_t>(std::min(rows_of_blocks_[row].cells, blocks_x));
+  };
+  // In batches of rows that keep the blocks within kMaxBlocks (a sparse
+  // update spread over a huge box would need a block per cell): when the
+  // next row might pass it, every block is written back and let go first.
+  // An update's usual rows are one batch.
+  size_t written = 0;
+  for (size_t first = 0; first < rows;) {
+    if (blocks_.size() + newBlocksAtMost(first) > kMaxBlocks) {
+      written += writeBackIf(tree, pool, counters, [](const Block&) { return true; });
+      clear();
+    }
+    size_t end = first + 1, room = kMaxBlocks - std::min(kMaxBlocks, blocks_.size() + newBlocksAtMost(first));
+    for (; end < rows && newBlocksAtMost(end) <= room; ++end) room -= newBlocksAtMost(end);
+    if (pool && end - first > 1)
+      pool->run(end - first, [&](size_t k, unsigned worker) { addRow(first + k, worker); });
+    else
+      for (size_t r = first; r < end; ++r) addRow(r, 0);
+    first = end;
+  }
   for (size_t r = 0; r < rows; ++r) {
     const RowOutput& out = *rows_[r];
     touched_blocks->insert(touched_blocks->end(), out.touched.begin(), out.touched.end());
@@ -152,6 +182,7 @@ void FusionCache::add(const GridUpdateView& update, const AccumulatingOcTree& tr
     }
     log->changes.insert(log->changes.end(), out.changes.begin(), out.changes.end());
   }
+  return written;
 }
 
 void FusionCache::addRowOfBlocks(const GridUpdateView& update, const AccumulatingOcTree& tree, int key_offset,

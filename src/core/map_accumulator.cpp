@@ -358,12 +358,13 @@ bool MapAccumulator::integrate(const GridUpdateView& update, std::string* why) {
   static_assert(FusionCache::kEdge == kBlockCells, "the cache's blocks are the change-tracking blocks");
   if (!admits(update, why)) return false;
   // admits() put every cell inside the key range.
-  cache_->add(update, *tree_, static_cast<int>(tree_->coordToKey(0.0)), recordingLog(), &touched_blocks_, pool());
+  size_t written = cache_->add(update, tree_.get(), static_cast<int>(tree_->coordToKey(0.0)), recordingLog(),
+                               &touched_blocks_, pool(), counters());
   for (const Eigen::Vector3i& b : touched_blocks_) {
     if (!all_changed_) changed_blocks_.insert(packBlock(b));
     dirty_tiles_.insert(packedTileOf(b));
   }
-  const size_t written = cache_->maintain(tree_.get(), pool(), counters());
+  written += cache_->maintain(tree_.get(), pool(), counters());
   if (class_log_ && class_log_->overflowed) classesChangedEverywhere();  // too many to keep
   inner_stale_ = inner_stale_ || written > 0;
   if (W_recent_origins_.size() < kPruneOrigins) {

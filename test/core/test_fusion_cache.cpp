@@ -36,7 +36,7 @@ TEST(FusionCache, WritesBlocksBackWhenDueAndLetsIdleOnesGo) {
   const GridUpdate nothing;  // no cells
   std::vector<Eigen::Vector3i> touched;
   for (size_t k = 1; k <= FusionCache::kMaxUnwrittenUpdates + 1; ++k) {
-    cache.add(update, tree, offset, nullptr, &touched);
+    cache.add(update, &tree, offset, nullptr, &touched);
     EXPECT_EQ(touched.size(), 8u);
     EXPECT_EQ(cache.blocks(), 8u);
     const size_t written = cache.maintain(&tree, nullptr, nullptr);
@@ -55,21 +55,59 @@ TEST(FusionCache, WritesBlocksBackWhenDueAndLetsIdleOnesGo) {
   ASSERT_NE(cell, nullptr);
   EXPECT_EQ(cell->getLogOdds(), tree.getClampingThresMinLog());
   // Clamped free cells take no more free: nothing to write, and the blocks go when idle.
-  cache.add(update, tree, offset, nullptr, &touched);
+  cache.add(update, &tree, offset, nullptr, &touched);
   EXPECT_EQ(cache.unwrittenBlocks(), 0u);
   for (size_t k = 1; k <= FusionCache::kIdleUpdates; ++k) {
     ASSERT_EQ(cache.blocks(), 8u) << "idle update " << k;
-    cache.add(nothing, tree, offset, nullptr, &touched);
+    cache.add(nothing, &tree, offset, nullptr, &touched);
     EXPECT_TRUE(touched.empty());
     cache.maintain(&tree, nullptr, nullptr);
   }
   EXPECT_EQ(cache.blocks(), 0u);
   // Read back from the tree, a block holds the written values: an occupied add changes one cell.
   const GridUpdate hit = cubeUpdate(3.0f);
-  cache.add(hit, tree, offset, nullptr, &touched);
+  cache.add(hit, &tree, offset, nullptr, &touched);
   EXPECT_EQ(cache.unwrittenBlocks(), 8u);
   EXPECT_EQ(cache.writeBack(&tree, nullptr, nullptr), 8000u);
   cell = tree.search(octomap::OcTreeKey(offset + 19, offset + 7, offset));
   ASSERT_NE(cell, nullptr);
   EXPECT_FLOAT_EQ(cell->getLogOdds(), tree.getClampingThresMinLog() + 3.0f);
+}
+
+// An update whose cells lie in more blocks than kMaxBlocks (one cell in each
+// of 8192): the cache writes its blocks back and lets them go before a row of
+// blocks might pass the bound, so it never holds more; the tree gets every cell.
+TEST(FusionCache, KeepsItsBoundWithinOneUpdate) {
+  AccumulatingOcTree tree(0.25);
+  const int offset = static_cast<int>(tree.coordToKey(0.0));
+  constexpr int kBlocksX = 32, kBlocksY = 16, kBlocksZ = 16;  // 8192 blocks, 512 rows of 32
+  static_assert(kBlocksX * kBlocksY * kBlocksZ == 2 * FusionCache::kMaxBlocks, "twice the bound");
+  const Eigen::Vector3i size(kBlocksX * FusionCache::kEdge, kBlocksY * FusionCache::kEdge,
+                             kBlocksZ * FusionCache::kEdge);
+  GridUpdate update;
+  update.resolution_m = 0.25;
+  update.origin_index = Eigen::Vector3i::Zero();
+  update.size = size;
+  update.W_sensor_origin = Eigen::Vector3d::Constant(1.0);
+  for (int z = 0; z < size.z(); z += FusionCache::kEdge)
+    for (int y = 0; y < size.y(); y += FusionCache::kEdge)
+      for (int x = 0; x < size.x(); x += FusionCache::kEdge) {
+        update.run_start.push_back(static_cast<uint32_t>((int64_t{z} * size.y() + y) * size.x() + x));
+        update.run_length.push_back(1);
+        update.log_odds.push_back(0.5f);
+      }
+  ASSERT_TRUE(update.isConsistent());
+  FusionCache cache;
+  std::vector<Eigen::Vector3i> touched;
+  const size_t written = cache.add(update, &tree, offset, nullptr, &touched);
+  EXPECT_EQ(touched.size(), 8192u);
+  EXPECT_LE(cache.blocks(), FusionCache::kMaxBlocks);
+  EXPECT_GE(written, 4096u);  // at least the first half's blocks, one cell each
+  EXPECT_EQ(written + cache.writeBack(&tree, nullptr, nullptr), 8192u);
+  EXPECT_EQ(tree.getNumLeafNodes(), 8192u);
+  const octomap::OcTreeNode* last =
+      tree.search(octomap::OcTreeKey(offset + size.x() - FusionCache::kEdge, offset + size.y() - FusionCache::kEdge,
+                                     offset + size.z() - FusionCache::kEdge));
+  ASSERT_NE(last, nullptr);
+  EXPECT_EQ(last->getLogOdds(), 0.5f);
 }

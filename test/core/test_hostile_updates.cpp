@@ -28,6 +28,7 @@
 #include <utility>
 #include <vector>
 
+#include "stereo_occupancy/fusion_cache.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/map_accumulator.h"
 #include "stereo_occupancy/octomap_io.h"
@@ -141,6 +142,29 @@ TEST(HostileUpdates, TheFusionWorksOnTheCellsNotTheClaimedBox) {
     MapAccumulator map(config);
     return map.integrate(u) && map.tree().getNumLeafNodes() == 3;
   })) << "fusing three cells needed more than 64 MB, or failed";
+}
+
+// One cell in each 16^3 block of a 640^3 box (64000 blocks, with
+// max_update_cells raised to let it in): 1 GB of the fusion's cache before
+// the cache kept its bound within an update; now it writes its blocks back
+// and lets them go when the next row of blocks might pass kMaxBlocks (68 MB).
+TEST(HostileUpdates, ASparseUpdateKeepsTheCacheWithinItsBound) {
+  constexpr int kEdge = 640, kBlocksPerEdge = kEdge / FusionCache::kEdge;
+  std::vector<uint32_t> cells;
+  for (int z = 0; z < kBlocksPerEdge; ++z)
+    for (int y = 0; y < kBlocksPerEdge; ++y)
+      for (int x = 0; x < kBlocksPerEdge; ++x)
+        cells.push_back(static_cast<uint32_t>((int64_t{z} * kEdge * kEdge + int64_t{y} * kEdge + x) *
+                                              FusionCache::kEdge));  // each block's first cell
+  const GridUpdate u = claimedBox(Eigen::Vector3i(0, 0, 0), Eigen::Vector3i::Constant(kEdge), cells);
+  ASSERT_TRUE(u.isConsistent());
+  EXPECT_TRUE(runsWithin(size_t{192} << 20, [&] {
+    MapAccumulatorConfig config;
+    config.max_update_cells = kIntMax;
+    config.threads = 1;
+    MapAccumulator map(config);
+    return map.integrate(u) && map.tree().getNumLeafNodes() == cells.size();
+  })) << "fusing one cell per block needed more than 192 MB, or failed";
 }
 
 // Runs of no cells, in a box of no width or after a cell: nothing more to
