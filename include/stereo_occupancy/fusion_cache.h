@@ -39,10 +39,15 @@ class FusionCache {
   /// A block's edge [cells]: the parts of AccumulatingOcTree::addSiblingsInParts().
   static constexpr int kEdge = 1 << (16 - AccumulatingOcTree::kPartDepth);
   static constexpr int kCells = kEdge * kEdge * kEdge;
-  /// A block written back after this many updates since its first unwritten
-  /// change: the tree lags the updates by at most this, and the write-backs
-  /// spread over the updates.
-  static constexpr size_t kMaxUnwrittenUpdates = 16;
+  /// A block's changes wait this many updates after its first unwritten
+  /// change before the tree takes them (the write-backs spread over the updates) ...
+  static constexpr size_t kMinUnwrittenUpdates = 16;
+  /// ... plus 0 .. kStaggerUpdates - 1 more, picked by its key, so that the
+  /// blocks one update brought (a whole first frame's, all new to the tree)
+  /// fall due over several updates, not all in one.
+  static constexpr size_t kStaggerUpdates = 8;
+  /// The tree lags the updates by at most this many.
+  static constexpr size_t kMaxUnwrittenUpdates = kMinUnwrittenUpdates + kStaggerUpdates - 1;
   /// A block no update touched for this many updates is let go (after its write-back).
   static constexpr size_t kIdleUpdates = 8;
   /// More blocks than this (16.6 kB each) are written back and let go at once.
@@ -57,9 +62,9 @@ class FusionCache {
     std::array<float, kCells> log_odds;  ///< NaN: no leaf in the tree
     /// Cells an add changed since the last write-back: the tree takes these.
     std::array<uint64_t, kCells / 64> changed;
-    size_t last_update = 0;      ///< the update that touched it last
-    size_t first_unwritten = 0;  ///< the update of its oldest unwritten change
-    bool unwritten = false;      ///< changed holds a cell
+    size_t last_update = 0;  ///< the update that touched it last
+    size_t write_due = 0;    ///< the update after which its unwritten changes are written back
+    bool unwritten = false;  ///< changed holds a cell
   };
 
   /// Adds @p update's cells (GridUpdateView::isConsistent(), its keys inside
@@ -85,7 +90,7 @@ class FusionCache {
   /// The same for the blocks that the keys [@p lo, @p hi] overlap only; none let go.
   size_t writeBack(AccumulatingOcTree* tree, const octomap::OcTreeKey& lo, const octomap::OcTreeKey& hi,
                    WorkerPool* pool = nullptr, AccumulatingOcTree::WorkerCounters* counters = nullptr);
-  /// After add(): the write-backs due (kMaxUnwrittenUpdates), and the idle
+  /// After add(): the write-backs due (kMinUnwrittenUpdates, kStaggerUpdates), and the idle
   /// blocks let go; everything when the blocks exceed kMaxBlocks. Returns the cells written.
   size_t maintain(AccumulatingOcTree* tree, WorkerPool* pool, AccumulatingOcTree::WorkerCounters* counters);
 

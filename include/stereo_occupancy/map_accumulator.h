@@ -102,7 +102,7 @@ class MapAccumulator {
   /// Adds every cell's log-odds to the map (octomap's clamped update). Work
   /// and memory follow the cells carried, not the box claimed. The cells go
   /// into dense blocks in front of the tree (fusion_cache.h), which the tree
-  /// takes when a block's changes are FusionCache::kMaxUnwrittenUpdates old,
+  /// takes when a block's changes are 16 to 23 updates old (FusionCache::kMinUnwrittenUpdates, its stagger),
   /// when the block goes idle, or when anything reads the tree: every
   /// method here sees the map of every update so far. Returns false,
   /// leaving the map unchanged, if admits() refuses the update.

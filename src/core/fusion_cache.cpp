@@ -20,6 +20,16 @@ uint64_t blockKey(const octomap::OcTreeKey& first) {
          ((uint64_t{first[2]} >> kEdgeBits) << 32);
 }
 
+/// How many updates after kMinUnwrittenUpdates the block whose lowest key is
+/// @p first falls due: 0 .. kStaggerUpdates - 1, from a hash of its key
+/// (neighbouring blocks differ), the same for any number of threads.
+size_t staggerOf(const octomap::OcTreeKey& first) {
+  constexpr int kStaggerBits = 3;
+  static_assert(FusionCache::kStaggerUpdates == size_t{1} << kStaggerBits, "the hash's top bits");
+  constexpr uint64_t kGoldenRatio = 0x9E3779B97F4A7C15ull;  // Fibonacci hashing: the top bits mix all the key's
+  return static_cast<size_t>((blockKey(first) * kGoldenRatio) >> (64 - kStaggerBits));
+}
+
 /// Sets the cube of @p edge cells at @p offset (a block's linear index) to @p value.
 void fillCube(float* cells, int offset, int edge, float value) {
   for (int z = 0; z < edge; ++z)
@@ -265,7 +275,7 @@ void FusionCache::addRowOfBlocks(const GridUpdateView& update, const Accumulatin
         }
         if (changed_any && !block->unwritten) {
           block->unwritten = true;
-          block->first_unwritten = updates_;
+          block->write_due = updates_ + kMinUnwrittenUpdates + staggerOf(block->first);
         }
         v += static_cast<size_t>(stretch);
         i += stretch;
@@ -377,7 +387,7 @@ size_t FusionCache::maintain(AccumulatingOcTree* tree, WorkerPool* pool, Accumul
     return cells;
   }
   const size_t cells = writeBackIf(tree, pool, counters, [this](const Block& b) {
-    return b.first_unwritten + kMaxUnwrittenUpdates <= updates_ || b.last_update + kIdleUpdates <= updates_;
+    return b.write_due <= updates_ || b.last_update + kIdleUpdates <= updates_;
   });
   dropIf([this](const Block& b) { return !b.unwritten && b.last_update + kIdleUpdates <= updates_; });
   return cells;

@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <fstream>
 #include <iomanip>
 #include <iostream>
 #include <memory>
@@ -100,21 +101,31 @@ std::string minMedian(const std::vector<double>& ratio) {
 
 int run(int argc, char** argv) {
   std::vector<std::string> flights;
+  std::string per_frame_path;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--flight") {
       flights.push_back(so::tools::nextValue(argc, argv, &i));
+    } else if (a == "--per-frame") {
+      per_frame_path = so::tools::nextValue(argc, argv, &i);
     } else if (a == "--help") {
-      std::cout << "usage: compare_wavemap [--flight NAME]...\n"
+      std::cout << "usage: compare_wavemap [--flight NAME]... [--per-frame FILE.csv]\n"
                    "Times, per frame, one thread each: the nodelets' whole path (image in to map fused), "
                    "wavemap's projective integrator and OctoMap's insertPointCloud, each into its own map of "
-                   "the flight (default: every flight), one method after the other.\n";
+                   "the flight (default: every flight), one method after the other. --per-frame writes each "
+                   "frame's times (flight, frame, ours_ms, wavemap_ms, octomap_ms) as CSV.\n";
       return 0;
     } else {
       throw so::tools::UsageError("unknown option '" + a + "'");
     }
   }
   if (flights.empty()) flights = so::scenarioNames();
+  std::ofstream per_frame;
+  if (!per_frame_path.empty()) {
+    per_frame.open(per_frame_path);
+    if (!per_frame) throw std::runtime_error("cannot write " + per_frame_path);
+    per_frame << "flight,frame,ours_ms,wavemap_ms,octomap_ms\n";
+  }
   std::cout << "Per frame, one thread each, 0.25 m cells, 25 m range [ms: median / max]; the peers' time over "
                "ours per frame [min / median].\n\n"
                "| flight | frames | ours | wavemap | OctoMap | wavemap / ours | OctoMap / ours |\n"
@@ -122,6 +133,8 @@ int run(int argc, char** argv) {
   for (const std::string& name : flights) {
     const so::FlightScenario scenario = so::tools::scenarioNamed(name);
     const FlightTimes t = timeFlight(scenario);
+    for (size_t i = 0; per_frame.is_open() && i < t.ours.size(); ++i)
+      per_frame << name << ',' << i << ',' << t.ours[i] << ',' << t.wavemap[i] << ',' << t.octomap[i] << '\n';
     std::cout << "| " << name << " | " << t.ours.size() << " | " << medianMax(t.ours) << " | " << medianMax(t.wavemap)
               << " | " << medianMax(t.octomap) << " | " << minMedian(t.wavemap_ratio) << " | "
               << minMedian(t.octomap_ratio) << " |" << std::endl;
