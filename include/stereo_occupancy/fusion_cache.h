@@ -102,6 +102,9 @@ class FusionCache {
   /// Blocks held, and those with changes the tree has not taken.
   size_t blocks() const { return blocks_.size(); }
   size_t unwrittenBlocks() const;
+  /// The lowest keys of the blocks with changes the tree has not taken that
+  /// the keys [@p lo, @p hi] overlap (in no particular order).
+  std::vector<octomap::OcTreeKey> unwrittenBlocks(const octomap::OcTreeKey& lo, const octomap::OcTreeKey& hi) const;
 
  private:
   struct RowOutput;

@@ -214,7 +214,10 @@ class MapAccumulator {
   /// @p tile's parts (AccumulatingOcTree::kPartDepth nodes) that have
   /// children, for mergePart(); then mergeTileAbove() merges what lies
   /// between the parts and the tile. The steps in turn, with nothing fused
-  /// between them, give mergeEqualLeaves()' tree.
+  /// between them, give mergeEqualLeaves()' tree. The parts are those the
+  /// tile would have with the fusion's cache written back, in the tree's
+  /// depth-first order, but nothing is written back: each step writes back
+  /// its own part.
   std::vector<octomap::OcTreeKey> partsToMerge(const TileIndex& tile) const;
   /// Merges the equal leaves below one part of partsToMerge(); a part gone
   /// since (a prune, a dropped or cleared tile) merges nothing, so a queue

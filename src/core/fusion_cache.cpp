@@ -399,6 +399,14 @@ void FusionCache::drop(const octomap::OcTreeKey& lo, const octomap::OcTreeKey& h
 
 void FusionCache::clear() { blocks_.clear(); }
 
+std::vector<octomap::OcTreeKey> FusionCache::unwrittenBlocks(const octomap::OcTreeKey& lo,
+                                                             const octomap::OcTreeKey& hi) const {
+  std::vector<octomap::OcTreeKey> keys;
+  for (const auto& entry : blocks_)
+    if (entry.second->unwritten && overlaps(*entry.second, lo, hi)) keys.push_back(entry.second->first);
+  return keys;
+}
+
 size_t FusionCache::unwrittenBlocks() const {
   size_t n = 0;
   for (const auto& entry : blocks_) n += entry.second->unwritten;

@@ -512,12 +512,35 @@ size_t MapAccumulator::mergeEqualLeaves(const TileIndex& tile) {
   return mergeTileDownTo(tile, std::numeric_limits<unsigned>::max());
 }
 
+namespace {
+/// The position of the part @p key in the octree's depth-first walk (children
+/// in index order, x the lowest bit): its bits interleaved, z y x from the top level down.
+uint64_t depthFirstRank(const octomap::OcTreeKey& key) {
+  uint64_t rank = 0;
+  for (int b = 15; b >= 0; --b)
+    rank = (rank << 3) | (((key[2] >> b) & 1u) << 2) | (((key[1] >> b) & 1u) << 1) | ((key[0] >> b) & 1u);
+  return rank;
+}
+}  // namespace
+
 std::vector<octomap::OcTreeKey> MapAccumulator::partsToMerge(const TileIndex& tile) const {
   if (!tileInKeyRange(tile)) return {};
   octomap::OcTreeKey lo, hi;
   tileKeys(tile, static_cast<int>(tree_->coordToKey(0.0)), &lo, &hi);
-  writeBack(lo, hi);
-  return tree_->innerNodesBelow(lo, kTileDepth, AccumulatingOcTree::kPartDepth);
+  std::vector<octomap::OcTreeKey> parts = tree_->innerNodesBelow(lo, kTileDepth, AccumulatingOcTree::kPartDepth);
+  // A cached block with unwritten changes (a part: FusionCache::kEdge ==
+  // kBlockCells) has children once written back, and a write-back makes no
+  // other part's node inner: the parts a write-back of the tile would leave,
+  // without the write-back, which all of a mission's dirty tiles at once
+  // would make one update wait for.
+  const std::vector<octomap::OcTreeKey> cached = cache_->unwrittenBlocks(lo, hi);
+  if (cached.empty()) return parts;
+  parts.insert(parts.end(), cached.begin(), cached.end());
+  std::sort(parts.begin(), parts.end(), [](const octomap::OcTreeKey& a, const octomap::OcTreeKey& b) {
+    return depthFirstRank(a) < depthFirstRank(b);
+  });
+  parts.erase(std::unique(parts.begin(), parts.end()), parts.end());
+  return parts;
 }
 
 size_t MapAccumulator::mergePart(const octomap::OcTreeKey& part) {
