@@ -136,6 +136,34 @@ inline bool blockHasInformation(const float* cells) {
 #endif
 }
 
+/// Bit j set if cell j of the kInformationBlock cells from @p cells holds
+/// information (known and not 0, as blockHasInformation() decides): the
+/// encoding finds its runs' ends in the bits (SSE2 or NEON where available).
+inline uint32_t informationMask(const float* cells) {
+  static_assert(kInformationBlock == 16, "four groups of four lanes");
+  uint32_t mask = 0;
+#if defined(__SSE2__)
+  const __m128 unknown = _mm_set1_ps(LocalGrid::kUnknown), zero = _mm_setzero_ps();
+  for (int j = 0; j < kInformationBlock; j += 4) {
+    const __m128 v = _mm_loadu_ps(cells + j);
+    mask |= static_cast<uint32_t>(_mm_movemask_ps(_mm_and_ps(_mm_cmpneq_ps(v, unknown), _mm_cmpneq_ps(v, zero)))) << j;
+  }
+#elif defined(STEREO_OCCUPANCY_NEON_BLOCKS)
+  const float32x4_t unknown = vdupq_n_f32(LocalGrid::kUnknown), zero = vdupq_n_f32(0.0f);
+  const uint32_t lane_bits[4] = {1, 2, 4, 8};
+  const uint32x4_t bits = vld1q_u32(lane_bits);
+  for (int j = 0; j < kInformationBlock; j += 4) {  // neither unknown nor 0 (NaN included, as cmpneq)
+    const float32x4_t v = vld1q_f32(cells + j);
+    const uint32x4_t hit = vmvnq_u32(vorrq_u32(vceqq_f32(v, unknown), vceqq_f32(v, zero)));
+    mask |= vaddvq_u32(vandq_u32(hit, bits)) << j;
+  }
+#else
+  for (int j = 0; j < kInformationBlock; ++j)
+    mask |= static_cast<uint32_t>(cells[j] != LocalGrid::kUnknown && cells[j] != 0.0f) << j;
+#endif
+  return mask;
+}
+
 /// True if one of the kInformationBlock cells from @p cells holds exactly
 /// @p a or @p b (SSE2 or NEON where available).
 inline bool blockHolds(const float* cells, float a, float b) {

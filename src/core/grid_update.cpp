@@ -58,16 +58,41 @@ inline bool informative(float v) { return v != LocalGrid::kUnknown && v != 0.0f;
 /// returns the cells they cover.
 size_t findRuns(const float* data, size_t begin, size_t end, std::vector<uint32_t>* start,
                 std::vector<uint32_t>* length) {
-  size_t cells = 0, i = begin;
-  while (i < end) {
-    while (i + kInformationBlock <= end && !blockHasInformation(data + i)) i += kInformationBlock;  // empty space
-    while (i < end && !informative(data[i])) ++i;
-    if (i == end) break;
-    const size_t first = i;
-    while (i < end && informative(data[i])) ++i;
+  // kInformationBlock cells at a time as a bit mask: a run's ends are the
+  // mask's changes (no branch per cell), and a block all empty or all in a
+  // run costs one compare.
+  constexpr uint32_t kFull = (uint32_t{1} << kInformationBlock) - 1;
+  size_t cells = 0, first = 0;
+  bool in_run = false;
+  for (size_t i = begin; i < end; i += kInformationBlock) {
+    const size_t n = std::min<size_t>(kInformationBlock, end - i);
+    uint32_t mask = 0;
+    if (n == kInformationBlock) {
+      mask = informationMask(data + i);
+    } else {
+      for (size_t j = 0; j < n; ++j) mask |= static_cast<uint32_t>(informative(data[i + j])) << j;
+    }
+    if (mask == (in_run ? kFull : 0u)) continue;
+    const uint32_t within = n == kInformationBlock ? kFull : (uint32_t{1} << n) - 1;
+    for (uint32_t j = 0; j < n;) {
+      // The next cell from j where the run state changes.
+      const uint32_t changes = (in_run ? ~mask : mask) & within & (kFull << j);
+      if (changes == 0) break;
+      j = static_cast<uint32_t>(__builtin_ctz(changes));
+      if (in_run) {
+        start->push_back(static_cast<uint32_t>(first));
+        length->push_back(static_cast<uint32_t>(i + j - first));
+        cells += i + j - first;
+      } else {
+        first = i + j;
+      }
+      in_run = !in_run;
+    }
+  }
+  if (in_run) {
     start->push_back(static_cast<uint32_t>(first));
-    length->push_back(static_cast<uint32_t>(i - first));
-    cells += i - first;
+    length->push_back(static_cast<uint32_t>(end - first));
+    cells += end - first;
   }
   return cells;
 }

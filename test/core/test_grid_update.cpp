@@ -106,6 +106,48 @@ TEST(GridUpdate, EncodingOnAPoolEqualsOneScan) {
   EXPECT_TRUE(none.run_start.empty() && none.log_odds.empty());
 }
 
+// The runs are the maximal stretches of informative cells (known, not 0),
+// cell for cell as a plain scan finds them: short runs and gaps of every
+// length around the 16-cell blocks the encoding reads at once, zeros inside
+// known stretches, and grids whose size is no multiple of 16.
+TEST(GridUpdate, RunsAreThoseOfACellByCellScan) {
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int> length(1, 40);
+  std::uniform_real_distribution<float> value(-2.0f, 3.0f);
+  for (const Eigen::Vector3i& size :
+       {Eigen::Vector3i(37, 11, 5), Eigen::Vector3i(16, 4, 2), Eigen::Vector3i(7, 1, 1), Eigen::Vector3i(200, 9, 3)}) {
+    for (int round = 0; round < 20; ++round) {
+      LocalGrid grid;
+      grid.reset(Eigen::Vector3i::Zero(), size, 0.25);
+      float* cells = grid.data();
+      const size_t n = grid.numCells();
+      for (size_t i = 0; i < n;) {  // alternating stretches: known (some zeros) and unknown
+        const size_t end = std::min(n, i + static_cast<size_t>(length(rng)));
+        const bool known = rng() % 2 == 0;
+        for (; i < end; ++i) cells[i] = !known ? LocalGrid::kUnknown : rng() % 9 == 0 ? 0.0f : value(rng);
+      }
+      std::vector<uint32_t> start, run_length;
+      for (size_t i = 0; i < n; ++i) {
+        const bool informative = cells[i] != LocalGrid::kUnknown && cells[i] != 0.0f;
+        const bool continues = !start.empty() && start.back() + run_length.back() == i;
+        if (!informative) continue;
+        if (continues) {
+          ++run_length.back();
+        } else {
+          start.push_back(static_cast<uint32_t>(i));
+          run_length.push_back(1);
+        }
+      }
+      GridUpdate u;
+      encodeGridUpdate(grid, Eigen::Vector3d::Zero(), &u);
+      ASSERT_EQ(u.run_start, start) << size.transpose() << ", round " << round;
+      ASSERT_EQ(u.run_length, run_length);
+      std::string why;
+      EXPECT_TRUE(u.isConsistent(&why)) << why;
+    }
+  }
+}
+
 // Every value is checked, wherever it stands; finite extremes pass.
 TEST(GridUpdate, RefusesNonFiniteValues) {
   LocalGrid grid;
