@@ -50,8 +50,12 @@ class FusionCache {
   static constexpr size_t kMaxUnwrittenUpdates = kMinUnwrittenUpdates + kStaggerUpdates - 1;
   /// A block no update touched for this many updates is let go (after its write-back).
   static constexpr size_t kIdleUpdates = 8;
-  /// More blocks than this (16.6 kB each) are written back and let go at once.
+  /// The most blocks held (16.6 kB each, 68 MB): add() writes them all back
+  /// and lets them go before it might pass this. At least a row of blocks
+  /// across the key range (65536 keys / kEdge), so that one row always fits.
+  /// The flights' updates keep about 100 (at most 118 over a 300 s mission).
   static constexpr size_t kMaxBlocks = 4096;
+  static_assert(kMaxBlocks >= (size_t{1} << 16) / kEdge, "a row of blocks fits");
 
   FusionCache();
   ~FusionCache();
@@ -77,9 +81,9 @@ class FusionCache {
   /// in, once each.
   /// On @p pool's workers (null: this thread), the same blocks and values,
   /// and the same class changes and touched blocks in the same order, for any number.
-  /// The blocks stay within kMaxBlocks (or one row of blocks of the update,
-  /// if more): before a row that might pass it, every block is written into
-  /// @p tree and let go. Returns the cells so written (usually none).
+  /// The blocks stay within kMaxBlocks: before a row of blocks that might
+  /// pass it (counting each of its blocks as new), every block is written
+  /// into @p tree and let go. Returns the cells so written (usually none).
   size_t add(const GridUpdateView& update, AccumulatingOcTree* tree, int key_offset, ClassChangeLog* log,
              std::vector<Eigen::Vector3i>* touched_blocks, WorkerPool* pool = nullptr,
              AccumulatingOcTree::WorkerCounters* counters = nullptr);
@@ -90,8 +94,8 @@ class FusionCache {
   /// The same for the blocks that the keys [@p lo, @p hi] overlap only; none let go.
   size_t writeBack(AccumulatingOcTree* tree, const octomap::OcTreeKey& lo, const octomap::OcTreeKey& hi,
                    WorkerPool* pool = nullptr, AccumulatingOcTree::WorkerCounters* counters = nullptr);
-  /// After add(): the write-backs due (kMinUnwrittenUpdates, kStaggerUpdates), and the idle
-  /// blocks let go; everything when the blocks exceed kMaxBlocks. Returns the cells written.
+  /// After add(): the write-backs due (kMinUnwrittenUpdates, kStaggerUpdates),
+  /// and the idle blocks let go. Returns the cells written.
   size_t maintain(AccumulatingOcTree* tree, WorkerPool* pool, AccumulatingOcTree::WorkerCounters* counters);
 
   /// Lets go of the blocks that the keys [@p lo, @p hi] overlap, written back or not.

@@ -167,7 +167,8 @@ size_t FusionCache::add(const GridUpdateView& update, AccumulatingOcTree* tree, 
   // In batches of rows that keep the blocks within kMaxBlocks (a sparse
   // update spread over a huge box would need a block per cell): when the
   // next row might pass it, every block is written back and let go first.
-  // An update's usual rows are one batch.
+  // An update's usual rows are one batch: over the flights, the blocks held
+  // and the bound of an update's new ones stay below 320 together.
   size_t written = 0;
   for (size_t first = 0; first < rows;) {
     if (blocks_.size() + newBlocksAtMost(first) > kMaxBlocks) {
@@ -381,11 +382,6 @@ size_t FusionCache::writeBack(AccumulatingOcTree* tree, const octomap::OcTreeKey
 }
 
 size_t FusionCache::maintain(AccumulatingOcTree* tree, WorkerPool* pool, AccumulatingOcTree::WorkerCounters* counters) {
-  if (blocks_.size() > kMaxBlocks) {
-    const size_t cells = writeBackIf(tree, pool, counters, [](const Block&) { return true; });
-    clear();
-    return cells;
-  }
   const size_t cells = writeBackIf(tree, pool, counters, [this](const Block& b) {
     return b.write_due <= updates_ || b.last_update + kIdleUpdates <= updates_;
   });

@@ -2,10 +2,12 @@
 
 #include <vector>
 
+#include "octree_text.h"
 #include "stereo_occupancy/accumulating_octree.h"
 #include "stereo_occupancy/fusion_cache.h"
 #include "stereo_occupancy/grid_update.h"
 #include "stereo_occupancy/local_grid.h"
+#include "stereo_occupancy/worker_pool.h"
 
 using namespace stereo_occupancy;
 
@@ -79,28 +81,36 @@ TEST(FusionCache, WritesBlocksBackWhenDueAndLetsIdleOnesGo) {
   EXPECT_FLOAT_EQ(cell->getLogOdds(), tree.getClampingThresMinLog() + 3.0f);
 }
 
+/// 32 x 16 x 16 blocks (twice FusionCache::kMaxBlocks, 512 rows of 32) with
+/// @p cells cells in a row at each block's first, their values alternating
+/// between @p a and @p b.
+GridUpdate sparseUpdate(int cells, float a, float b) {
+  constexpr int kBlocksX = 32, kBlocksY = 16, kBlocksZ = 16;
+  static_assert(kBlocksX * kBlocksY * kBlocksZ == 2 * FusionCache::kMaxBlocks, "twice the bound");
+  GridUpdate update;
+  update.resolution_m = 0.25;
+  update.origin_index = Eigen::Vector3i::Zero();
+  update.size = Eigen::Vector3i(kBlocksX, kBlocksY, kBlocksZ) * FusionCache::kEdge;
+  update.W_sensor_origin = Eigen::Vector3d::Constant(1.0);
+  const Eigen::Vector3i& size = update.size;
+  for (int z = 0; z < size.z(); z += FusionCache::kEdge)
+    for (int y = 0; y < size.y(); y += FusionCache::kEdge)
+      for (int x = 0; x < size.x(); x += FusionCache::kEdge) {
+        update.run_start.push_back(static_cast<uint32_t>((int64_t{z} * size.y() + y) * size.x() + x));
+        update.run_length.push_back(static_cast<uint32_t>(cells));
+        for (int c = 0; c < cells; ++c) update.log_odds.push_back(update.log_odds.size() % 2 ? a : b);
+      }
+  return update;
+}
+
 // An update whose cells lie in more blocks than kMaxBlocks (one cell in each
 // of 8192): the cache writes its blocks back and lets them go before a row of
 // blocks might pass the bound, so it never holds more; the tree gets every cell.
 TEST(FusionCache, KeepsItsBoundWithinOneUpdate) {
   AccumulatingOcTree tree(0.25);
   const int offset = static_cast<int>(tree.coordToKey(0.0));
-  constexpr int kBlocksX = 32, kBlocksY = 16, kBlocksZ = 16;  // 8192 blocks, 512 rows of 32
-  static_assert(kBlocksX * kBlocksY * kBlocksZ == 2 * FusionCache::kMaxBlocks, "twice the bound");
-  const Eigen::Vector3i size(kBlocksX * FusionCache::kEdge, kBlocksY * FusionCache::kEdge,
-                             kBlocksZ * FusionCache::kEdge);
-  GridUpdate update;
-  update.resolution_m = 0.25;
-  update.origin_index = Eigen::Vector3i::Zero();
-  update.size = size;
-  update.W_sensor_origin = Eigen::Vector3d::Constant(1.0);
-  for (int z = 0; z < size.z(); z += FusionCache::kEdge)
-    for (int y = 0; y < size.y(); y += FusionCache::kEdge)
-      for (int x = 0; x < size.x(); x += FusionCache::kEdge) {
-        update.run_start.push_back(static_cast<uint32_t>((int64_t{z} * size.y() + y) * size.x() + x));
-        update.run_length.push_back(1);
-        update.log_odds.push_back(0.5f);
-      }
+  const GridUpdate update = sparseUpdate(1, 0.5f, 0.5f);
+  const Eigen::Vector3i& size = update.size;
   ASSERT_TRUE(update.isConsistent());
   FusionCache cache;
   std::vector<Eigen::Vector3i> touched;
@@ -115,4 +125,53 @@ TEST(FusionCache, KeepsItsBoundWithinOneUpdate) {
                                      offset + size.z() - FusionCache::kEdge));
   ASSERT_NE(last, nullptr);
   EXPECT_EQ(last->getLogOdds(), 0.5f);
+}
+
+// An update fused in several batches (written back and let go between them),
+// twice, on a pool of three workers and on one thread: the same tree, the
+// same blocks touched and the same class changes in the same order; and the
+// tree node for node octomap's updateNode's over the same adds.
+TEST(FusionCache, BatchesOnAPoolAreUpdateNodesTree) {
+  const GridUpdate update = sparseUpdate(3, 0.85f, -0.4f);
+  ASSERT_TRUE(update.isConsistent());
+  octomap::OcTree plain(0.25);
+  const int offset = static_cast<int>(plain.coordToKey(0.0));
+  for (int pass = 0; pass < 2; ++pass)
+    update.forEachCell([&](const Eigen::Vector3i& g, float v) {
+      plain.updateNode(octomap::OcTreeKey(g.x() + offset, g.y() + offset, g.z() + offset), v, true);
+    });
+  plain.updateInnerOccupancy();
+  std::string trees[2];
+  std::vector<Eigen::Vector3i> touched[2];
+  std::vector<CellClassChange> changes[2];
+  for (int run = 0; run < 2; ++run) {
+    WorkerPool pool(3);
+    WorkerPool* workers = run == 0 ? nullptr : &pool;
+    AccumulatingOcTree::WorkerCounters counters;
+    AccumulatingOcTree tree(0.25);
+    FusionCache cache;
+    ClassChangeLog log;
+    log.max_changes = 1 << 20;
+    std::vector<Eigen::Vector3i> blocks;
+    for (int pass = 0; pass < 2; ++pass) {
+      EXPECT_GT(cache.add(update, &tree, offset, &log, &blocks, workers, &counters), 0u);  // batches written back
+      EXPECT_LE(cache.blocks(), FusionCache::kMaxBlocks);
+      touched[run].insert(touched[run].end(), blocks.begin(), blocks.end());
+    }
+    cache.writeBack(&tree, workers, &counters);
+    tree.updateInnerOccupancy();
+    trees[run] = fullTree(tree);
+    changes[run] = log.changes;
+    EXPECT_FALSE(log.overflowed);
+  }
+  EXPECT_TRUE(trees[0] == fullTree(plain)) << "one thread: not updateNode's tree";
+  EXPECT_TRUE(trees[1] == trees[0]) << "three workers: another tree";
+  EXPECT_EQ(touched[1], touched[0]);
+  EXPECT_EQ(touched[0].size(), 2u * 8192u);
+  ASSERT_EQ(changes[1].size(), changes[0].size());
+  EXPECT_EQ(changes[0].size(), 3u * 8192u);  // each cell once from unknown; the second pass changes no class
+  for (size_t i = 0; i < changes[0].size(); ++i) {
+    ASSERT_EQ(changes[1][i].cell, changes[0][i].cell) << "change " << i;
+    ASSERT_EQ(changes[1][i].now, changes[0][i].now) << "change " << i;
+  }
 }
