@@ -52,8 +52,8 @@ class FusionCache {
   static constexpr size_t kIdleUpdates = 8;
   /// The most blocks held (16.6 kB each, 68 MB): add() writes them all back
   /// and lets them go before it might pass this. At least a row of blocks
-  /// across the key range (65536 keys / kEdge), so that one row always fits.
-  /// The flights' updates keep about 100 (at most 118 over a 300 s mission).
+  /// across the key range (65536 keys / kEdge), so that one row always fits;
+  /// far above what a flight's updates hold (docs/performance.md).
   static constexpr size_t kMaxBlocks = 4096;
   static_assert(kMaxBlocks >= (size_t{1} << 16) / kEdge, "a row of blocks fits");
 

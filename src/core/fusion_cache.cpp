@@ -167,8 +167,8 @@ size_t FusionCache::add(const GridUpdateView& update, AccumulatingOcTree* tree, 
   // In batches of rows that keep the blocks within kMaxBlocks (a sparse
   // update spread over a huge box would need a block per cell): when the
   // next row might pass it, every block is written back and let go first.
-  // An update's usual rows are one batch: over the flights, the blocks held
-  // and the bound of an update's new ones stay below 320 together.
+  // An update's usual rows are one batch (docs/performance.md: the flights'
+  // blocks held and new ones stay far below the bound).
   size_t written = 0;
   for (size_t first = 0; first < rows;) {
     if (blocks_.size() + newBlocksAtMost(first) > kMaxBlocks) {
