@@ -101,6 +101,19 @@ bool runsWithin(size_t extra_bytes, const std::function<bool()>& work) {
   return WIFEXITED(status) && WEXITSTATUS(status) == 0;
 }
 
+/// True if a map on one thread that lets in any box (max_update_cells
+/// raised) fuses @p u within @p extra_bytes more address space and then
+/// holds @p leaves leaves.
+bool fusesWithin(size_t extra_bytes, const GridUpdate& u, size_t leaves) {
+  return runsWithin(extra_bytes, [&] {
+    MapAccumulatorConfig config;
+    config.max_update_cells = kIntMax;
+    config.threads = 1;
+    MapAccumulator map(config);
+    return map.integrate(u) && map.tree().getNumLeafNodes() == leaves;
+  });
+}
+
 }  // namespace
 
 // A one-cell update claiming 1 x 65535 x 65535 cells (17 GB of rows before
@@ -135,13 +148,7 @@ TEST(HostileUpdates, TheFusionWorksOnTheCellsNotTheClaimedBox) {
   const uint32_t last = static_cast<uint32_t>(uint64_t{46340} * 46340 - 1);
   const GridUpdate u = claimedBox(Eigen::Vector3i(0, -23170, -23170), size, {0, 70000, last});
   ASSERT_TRUE(u.isConsistent());
-  EXPECT_TRUE(runsWithin(size_t{64} << 20, [&] {
-    MapAccumulatorConfig config;
-    config.max_update_cells = kIntMax;
-    config.threads = 1;
-    MapAccumulator map(config);
-    return map.integrate(u) && map.tree().getNumLeafNodes() == 3;
-  })) << "fusing three cells needed more than 64 MB, or failed";
+  EXPECT_TRUE(fusesWithin(size_t{64} << 20, u, 3)) << "fusing three cells needed more than 64 MB, or failed";
 }
 
 // One cell in each 16^3 block of a 640^3 box (64000 blocks, with
@@ -158,13 +165,8 @@ TEST(HostileUpdates, ASparseUpdateKeepsTheCacheWithinItsBound) {
                                               FusionCache::kEdge));  // each block's first cell
   const GridUpdate u = claimedBox(Eigen::Vector3i(0, 0, 0), Eigen::Vector3i::Constant(kEdge), cells);
   ASSERT_TRUE(u.isConsistent());
-  EXPECT_TRUE(runsWithin(size_t{192} << 20, [&] {
-    MapAccumulatorConfig config;
-    config.max_update_cells = kIntMax;
-    config.threads = 1;
-    MapAccumulator map(config);
-    return map.integrate(u) && map.tree().getNumLeafNodes() == cells.size();
-  })) << "fusing one cell per block needed more than 192 MB, or failed";
+  EXPECT_TRUE(fusesWithin(size_t{192} << 20, u, cells.size()))
+      << "fusing one cell per block needed more than 192 MB, or failed";
 }
 
 // Runs of no cells, in a box of no width or after a cell: nothing more to
