@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cstdint>
 #include <limits>
 #include <memory>
 #include <vector>
@@ -25,6 +26,21 @@ inline bool leafOverlaps(const octomap::OcTree::leaf_bbx_iterator& it, unsigned 
   const int side = 1 << (tree_depth - it.getDepth());
   for (int a = 0; a < 3; ++a)
     if (first[a] + side - 1 < lo[a] || first[a] > hi[a]) return false;
+  return true;
+}
+
+/// The keys of the global cells @p cells (a key is a cell + @p key_offset),
+/// cut to the key range into [@p lo, @p hi]; false if none lie in it (or
+/// the box is empty): beyond it the map holds nothing.
+inline bool keysOfCells(const CellBox& cells, int key_offset, octomap::OcTreeKey* lo, octomap::OcTreeKey* hi) {
+  if (cells.isEmpty()) return false;
+  constexpr int64_t kKeyMax = std::numeric_limits<octomap::key_type>::max();
+  for (int a = 0; a < 3; ++a) {
+    const int64_t k_lo = int64_t{cells.min()[a]} + key_offset, k_hi = int64_t{cells.max()[a]} + key_offset;
+    if (k_hi < 0 || k_lo > kKeyMax) return false;
+    (*lo)[a] = static_cast<octomap::key_type>(std::max<int64_t>(k_lo, 0));
+    (*hi)[a] = static_cast<octomap::key_type>(std::min(k_hi, kKeyMax));
+  }
   return true;
 }
 

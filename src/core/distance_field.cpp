@@ -24,7 +24,6 @@ namespace {
 constexpr double kRecentreBlocks = 1.0;
 /// Global cell index of OctoMap key 0 (the key of index 0 is 32768).
 constexpr int kKeyOffset = 32768;
-constexpr int kKeyMax = 65535;
 
 int floorDiv(int g, int n) { return g >= 0 ? g / n : -((-g + n - 1) / n); }
 int positiveMod(int g, int n) { return g - floorDiv(g, n) * n; }
@@ -360,17 +359,10 @@ void DistanceField::readClasses(const MapSource& source, const Eigen::Vector3i& 
         const Eigen::Vector3i b(x, y, z);
         std::memset(&classes_[slotOf(b) * kBlockVolume], static_cast<int>(CellClass::kUnknown), kBlockVolume);
       }
-  // The box's keys, cut to the key range (beyond it the map holds nothing).
-  const Eigen::Vector3i g_lo = (origin_block_ + lo) * kBlockCells;
-  const Eigen::Vector3i g_hi = (origin_block_ + hi) * kBlockCells - Eigen::Vector3i::Ones();
+  const CellBox cells((origin_block_ + lo) * kBlockCells, (origin_block_ + hi) * kBlockCells - Eigen::Vector3i::Ones());
   octomap::OcTreeKey key_lo, key_hi;
-  for (int a = 0; a < 3; ++a) {
-    const int k_lo = g_lo[a] + kKeyOffset, k_hi = g_hi[a] + kKeyOffset;
-    if (k_hi < 0 || k_lo > kKeyMax) return;
-    key_lo[a] = static_cast<octomap::key_type>(std::max(k_lo, 0));
-    key_hi[a] = static_cast<octomap::key_type>(std::min(k_hi, kKeyMax));
-  }
-  const octomap::OcTree& map = source(CellBox(g_lo, g_hi));
+  if (!keysOfCells(cells, kKeyOffset, &key_lo, &key_hi)) return;  // beyond the key range the map holds nothing
+  const octomap::OcTree& map = source(cells);
   const unsigned depth = map.getTreeDepth();
   for (auto it = map.begin_leafs_bbx(key_lo, key_hi), end = map.end_leafs_bbx(); it != end; ++it) {
     if (!leafOverlaps(it, depth, key_lo, key_hi)) continue;  // octomap 1.9 hands out some just outside

@@ -71,16 +71,8 @@ const octomap::OcTree& MapAccumulator::leafTree() const {
 }
 
 const octomap::OcTree& MapAccumulator::leafTree(const CellBox& cells) const {
-  if (cells.isEmpty()) return *tree_;
-  // The box's keys, cut to the key range (beyond it the map holds nothing).
-  const int64_t offset = tree_->coordToKey(0.0), key_max = std::numeric_limits<octomap::key_type>::max();
   octomap::OcTreeKey lo, hi;
-  for (int a = 0; a < 3; ++a) {
-    const int64_t k_lo = cells.min()[a] + offset, k_hi = cells.max()[a] + offset;
-    if (k_hi < 0 || k_lo > key_max) return *tree_;
-    lo[a] = static_cast<octomap::key_type>(std::max<int64_t>(k_lo, 0));
-    hi[a] = static_cast<octomap::key_type>(std::min(k_hi, key_max));
-  }
+  if (!keysOfCells(cells, static_cast<int>(tree_->coordToKey(0.0)), &lo, &hi)) return *tree_;
   inner_stale_ = cache_->writeBack(tree_.get(), lo, hi, pool(), counters()) > 0 || inner_stale_;
   return *tree_;
 }
