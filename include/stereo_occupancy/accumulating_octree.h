@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <vector>
@@ -178,6 +179,16 @@ class AccumulatingOcTree : public octomap::OcTree {
   /// Returns how many nodes became leaves.
   size_t pruneBelow(const octomap::OcTreeKey& key, unsigned depth,
                     unsigned deepest = std::numeric_limits<unsigned>::max());
+  /// Called with a node's lowest key and its depth just before the node
+  /// merges; the node then merges only if its children are still eight
+  /// leaves of one value.
+  using BeforeMerge = std::function<void(const octomap::OcTreeKey& lo, unsigned depth)>;
+  /// pruneBelow(key, depth, deepest) with @p before_merge called for each
+  /// node about to merge (the same nodes merge as after @p before_merge's
+  /// changes everywhere first, provided it only adds detail: it never
+  /// merges, and it changes nothing outside the node it is called for).
+  /// @p key is the lowest key of the node at @p depth.
+  size_t pruneBelow(const octomap::OcTreeKey& key, unsigned depth, unsigned deepest, const BeforeMerge& before_merge);
 
   /// The keys of the nodes at @p part_depth below the node of @p key at
   /// @p depth that have children (the ones pruneBelow() could merge), in
@@ -196,6 +207,9 @@ class AccumulatingOcTree : public octomap::OcTree {
   /// Frees everything below @p node, which becomes a leaf: octomap frees a
   /// node's child array only in pruneNode(), so each level is made prunable.
   void collapse(octomap::OcTreeNode* node);
+  /// pruneBelow()'s merges with @p before_merge, below @p node (lowest key @p lo, at @p depth).
+  size_t mergeUp(octomap::OcTreeNode* node, const octomap::OcTreeKey& lo, unsigned depth, unsigned deepest,
+                 const BeforeMerge& before_merge);
   /// The node at kPartDepth on @p key's path, the path made as LeafUpdater
   /// would (@p created: the node is new); null if a pruned leaf lies above it.
   octomap::OcTreeNode* partRoot(const octomap::OcTreeKey& key, bool* created);

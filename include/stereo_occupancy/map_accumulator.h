@@ -225,7 +225,13 @@ class MapAccumulator {
   /// nodes became leaves.
   size_t mergePart(const octomap::OcTreeKey& part);
   /// Merges @p tile's nodes above its parts (depths kTileDepth to kPartDepth - 1).
+  /// Of the fusion's blocks with changes the tree has not taken, it writes
+  /// back only those below a node about to merge (which then merges only if
+  /// it still can); the others wait for their turn. The same nodes merge as
+  /// with the whole tile written back first.
   size_t mergeTileAbove(const TileIndex& tile);
+  /// The fusion's blocks whose changes the tree has not taken yet (fusion_cache.h).
+  size_t unwrittenBlocks() const;
   /// Sets leaves, clamped, in tiles that hold nothing (a tile back from disk).
   void insertLeaves(const std::vector<Leaf>& leaves);
   /// The tiles changed since the last call (by updates, clearBox, or leaves
@@ -240,9 +246,6 @@ class MapAccumulator {
   std::vector<std::string> save(const std::string& directory, const std::string& base_name) const;
 
  private:
-  /// AccumulatingOcTree::pruneBelow() over @p tile's node, its depths
-  /// kTileDepth to @p deepest (mergeEqualLeaves(), mergeTileAbove()).
-  size_t mergeTileDownTo(const TileIndex& tile, unsigned deepest);
   struct Fusion;  // the workers that write the cache back
   void applyThresholds();
   /// The fusion's workers and their node counters; null when it runs on the calling thread.

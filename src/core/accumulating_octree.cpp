@@ -76,6 +76,40 @@ size_t AccumulatingOcTree::pruneBelow(const octomap::OcTreeKey& key, unsigned de
   return merged;
 }
 
+size_t AccumulatingOcTree::pruneBelow(const octomap::OcTreeKey& key, unsigned depth, unsigned deepest,
+                                      const BeforeMerge& before_merge) {
+  if (!root || depth > tree_depth) return 0;
+  deepest = std::min(deepest, tree_depth - 1);
+  octomap::OcTreeNode* node = root;
+  for (unsigned d = 0; d < depth; ++d) {
+    const unsigned pos = octomap::computeChildIdx(key, static_cast<int>(tree_depth - 1 - d));
+    if (!nodeChildExists(node, pos)) return 0;  // nothing there, or a coarser leaf
+    node = getNodeChild(node, pos);
+  }
+  return mergeUp(node, key, depth, deepest, before_merge);
+}
+
+size_t AccumulatingOcTree::mergeUp(octomap::OcTreeNode* node, const octomap::OcTreeKey& lo, unsigned depth,
+                                   unsigned deepest, const BeforeMerge& before_merge) {
+  if (!nodeHasChildren(node)) return 0;
+  size_t merged = 0;
+  // Children first: a node merged at one level may make its parent
+  // mergeable at the next, as pruneBelow()'s passes from the deepest level up.
+  if (depth < deepest) {
+    const unsigned bit = tree_depth - 1 - depth;
+    for (unsigned i = 0; i < 8; ++i) {
+      if (!nodeChildExists(node, i)) continue;
+      octomap::OcTreeKey child = lo;
+      for (unsigned a = 0; a < 3; ++a)
+        if (i & (1u << a)) child[a] = static_cast<octomap::key_type>(child[a] | (1u << bit));
+      merged += mergeUp(getNodeChild(node, i), child, depth + 1, deepest, before_merge);
+    }
+  }
+  if (!isNodeCollapsible(node)) return merged;
+  before_merge(lo, depth);
+  return merged + (pruneNode(node) ? 1 : 0);  // pruneNode() checks again
+}
+
 std::vector<octomap::OcTreeKey> AccumulatingOcTree::innerNodesBelow(const octomap::OcTreeKey& key, unsigned depth,
                                                                     unsigned part_depth) const {
   std::vector<octomap::OcTreeKey> keys;

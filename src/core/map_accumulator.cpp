@@ -501,7 +501,13 @@ std::vector<MapAccumulator::Leaf> MapAccumulator::tileLeaves(const TileIndex& ti
 }
 
 size_t MapAccumulator::mergeEqualLeaves(const TileIndex& tile) {
-  return mergeTileDownTo(tile, std::numeric_limits<unsigned>::max());
+  if (!tileInKeyRange(tile)) return 0;
+  octomap::OcTreeKey lo, hi;
+  tileKeys(tile, static_cast<int>(tree_->coordToKey(0.0)), &lo, &hi);
+  writeBack(lo, hi);
+  const size_t merged = tree_->pruneBelow(lo, kTileDepth);
+  inner_stale_ = inner_stale_ || merged > 0;
+  return merged;
 }
 
 namespace {
@@ -549,18 +555,30 @@ size_t MapAccumulator::mergePart(const octomap::OcTreeKey& part) {
 }
 
 size_t MapAccumulator::mergeTileAbove(const TileIndex& tile) {
-  return mergeTileDownTo(tile, AccumulatingOcTree::kPartDepth - 1);
-}
-
-size_t MapAccumulator::mergeTileDownTo(const TileIndex& tile, unsigned deepest) {
   if (!tileInKeyRange(tile)) return 0;
   octomap::OcTreeKey lo, hi;
   tileKeys(tile, static_cast<int>(tree_->coordToKey(0.0)), &lo, &hi);
-  writeBack(lo, hi);
-  const size_t merged = tree_->pruneBelow(lo, kTileDepth, deepest);
+  // Only the blocks below a node about to merge are written back; the
+  // tile's other changed blocks, mostly below nodes that cannot merge, wait
+  // for the cache's own write-backs (docs/performance.md).
+  const std::vector<octomap::OcTreeKey> unwritten = cache_->unwrittenBlocks(lo, hi);
+  const auto write_back_below = [&](const octomap::OcTreeKey& node_lo, unsigned depth) {
+    const int edge = 1 << (tree_->getTreeDepth() - depth);
+    octomap::OcTreeKey node_hi;
+    for (int a = 0; a < 3; ++a) node_hi[a] = static_cast<octomap::key_type>(node_lo[a] + edge - 1);
+    const auto below = [&](const octomap::OcTreeKey& block) {
+      for (int a = 0; a < 3; ++a)
+        if (block[a] < node_lo[a] || block[a] > node_hi[a]) return false;
+      return true;
+    };
+    if (std::any_of(unwritten.begin(), unwritten.end(), below)) writeBack(node_lo, node_hi);
+  };
+  const size_t merged = tree_->pruneBelow(lo, kTileDepth, AccumulatingOcTree::kPartDepth - 1, write_back_below);
   inner_stale_ = inner_stale_ || merged > 0;
   return merged;
 }
+
+size_t MapAccumulator::unwrittenBlocks() const { return cache_->unwrittenBlocks(); }
 
 size_t MapAccumulator::dropTile(const TileIndex& tile) {
   if (!tileInKeyRange(tile)) return 0;

@@ -48,7 +48,9 @@ bool MissionMap::integrate(const GridUpdateView& update, std::string* why) {
     if (!live_.admits(update, why)) return false;  // bounds the box before its tiles are asked for
     for (const TileIndex& t : live_.tilesOf(update)) makeResident(t);
   }
-  return live_.integrate(update, why);
+  if (!live_.integrate(update, why)) return false;
+  ++updates_since_maintain_;
+  return true;
 }
 
 MaintainResult MissionMap::maintain(MergeTiming merges) {
@@ -73,6 +75,7 @@ MaintainResult MissionMap::maintain(MergeTiming merges) {
   else
     mergeChangedTiles(&result);
   freed_memory_ = freed_memory_ || (store_ && (result.tiles_stored > 0 || result.nodes_merged > 0 || steps_merged));
+  updates_since_maintain_ = 0;
   return result;
 }
 
@@ -86,7 +89,8 @@ void MissionMap::queueChangedTiles() {
     queued_merges_.push_back(std::move(q));
   }
   unmerged_.clear();
-  parts_per_step_ = std::max<size_t>(1, (parts + kMergeSteps - 1) / kMergeSteps);
+  merge_steps_ = std::max(kMergeSteps, updates_since_maintain_ / kMergeShare);
+  parts_per_step_ = std::max<size_t>(1, (parts + merge_steps_ - 1) / merge_steps_);
 }
 
 MaintainResult MissionMap::mergeStep() {
@@ -247,6 +251,7 @@ void MissionMap::reset() {
   unmerged_.clear();
   queued_merges_.clear();
   spread_merged_ = 0;
+  updates_since_maintain_ = 0;
   resident_.clear();
   unsaved_.clear();
   unpublished_.clear();
@@ -259,6 +264,7 @@ void MissionMap::load(const std::string& path) {
   unmerged_.clear();
   queued_merges_.clear();
   spread_merged_ = 0;
+  updates_since_maintain_ = 0;
   resident_.clear();
   unsaved_.clear();
   unpublished_.clear();

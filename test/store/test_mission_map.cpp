@@ -348,7 +348,8 @@ void flyOverTwoTiles(MissionMap* mission) {
 }  // namespace
 
 // maintain(kSpread) merges nothing; mergeStep() then merges a part at a time,
-// kMergeSteps calls at most, and ends in the tree one maintain() makes.
+// mergeSteps() calls at most (half the 46 updates before the maintain), and
+// ends in the tree one maintain() makes.
 TEST(MissionMap, SpreadMergesEndInTheTreeOfOneMerge) {
   MissionMap now{MapAccumulatorConfig()}, spread{MapAccumulatorConfig()};
   flyOverTwoTiles(&now);
@@ -359,18 +360,63 @@ TEST(MissionMap, SpreadMergesEndInTheTreeOfOneMerge) {
   EXPECT_EQ(spread.maintain(MergeTiming::kSpread).nodes_merged, 0u);
   EXPECT_EQ(spread.live().tree().getNumLeafNodes(), leaves_before);
   ASSERT_TRUE(spread.mergesQueued());
+  static_assert(MissionMap::kMergeShare == 2 && MissionMap::kMergeSteps == 16, "46 updates: 23 steps");
+  ASSERT_EQ(spread.mergeSteps(), 23u);
   size_t steps = 0, merged = 0, largest = 0;
   while (spread.mergesQueued()) {
     const size_t step = spread.mergeStep().nodes_merged;
     merged += step;
     largest = std::max(largest, step);
-    ASSERT_LE(++steps, MissionMap::kMergeSteps);
+    ASSERT_LE(++steps, spread.mergeSteps());
   }
-  EXPECT_GE(steps, MissionMap::kMergeSteps / 2);
-  EXPECT_LE(largest, merged_now / 4) << "the merges are spread";
+  EXPECT_GT(steps, MissionMap::kMergeSteps) << "more steps than the fewest";
+  EXPECT_LE(largest, merged_now / 8) << "the merges are spread";
   EXPECT_EQ(merged, merged_now);
   EXPECT_EQ(fullBytes(spread.live().tree()), fullBytes(now.live().tree()));
   EXPECT_EQ(spread.mergeStep().nodes_merged, 0u) << "nothing queued";
+  // Three updates since that maintain: the fewest steps.
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(spread.integrate(singleCell(Eigen::Vector3i(200, i, 0), 2.0f)));
+  spread.maintain(MergeTiming::kSpread);
+  EXPECT_EQ(spread.mergeSteps(), MissionMap::kMergeSteps);
+}
+
+// The merges above the parts write back only the fusion's blocks below a
+// node about to merge: a change below a node that cannot merge (the first
+// tile's occupied cells) stays in the cache; one below a node that can (the
+// second tile's free cubes) is written back first and keeps that node from
+// merging. The tree then is the one the whole tiles written back first give.
+TEST(MissionMap, MergesAboveThePartsWriteBackOnlyBelowNodesAboutToMerge) {
+  MissionMap lazy{MapAccumulatorConfig()}, eager{MapAccumulatorConfig()};
+  flyOverTwoTiles(&lazy);
+  flyOverTwoTiles(&eager);
+  const GridUpdate box = filledBox(Eigen::Vector3i(192, 0, 0), Eigen::Vector3i(128, 64, 32), -0.4f);
+  const std::vector<MapAccumulator::TileIndex> tiles = lazy.live().tilesOf(box);
+  ASSERT_EQ(tiles.size(), 2u);
+  for (MissionMap* m : {&lazy, &eager})
+    for (const auto& t : tiles)
+      for (const auto& part : m->live().partsToMerge(t)) m->live().mergePart(part);
+  ASSERT_EQ(lazy.live().unwrittenBlocks(), 0u) << "each part wrote its block back";
+  const GridUpdate mixed = singleCell(Eigen::Vector3i(200, 3, 1), 2.0f);      // beside the first tile's occupied cells
+  const GridUpdate uniform = singleCell(Eigen::Vector3i(300, 40, 20), 2.0f);  // in the second tile's free cubes
+  for (MissionMap* m : {&lazy, &eager}) {
+    ASSERT_TRUE(m->integrate(mixed));
+    ASSERT_TRUE(m->integrate(uniform));
+  }
+  ASSERT_EQ(lazy.live().unwrittenBlocks(), 2u);
+  eager.live().tree();  // every block written back
+  size_t merged_lazy = 0, merged_eager = 0;
+  for (const auto& t : tiles) {
+    merged_lazy += lazy.live().mergeTileAbove(t);
+    merged_eager += eager.live().mergeTileAbove(t);
+  }
+  EXPECT_EQ(lazy.live().unwrittenBlocks(), 1u) << "only the block below a node that could merge";
+  EXPECT_GT(merged_lazy, 0u);
+  EXPECT_EQ(merged_lazy, merged_eager);
+  EXPECT_EQ(fullBytes(lazy.live().tree()), fullBytes(eager.live().tree()));
+  const octomap::OcTreeNode* cell =
+      lazy.live().tree().search(lazy.live().tree().coordToKey(300.5 * kRes, 40.5 * kRes, 20.5 * kRes));
+  ASSERT_NE(cell, nullptr);
+  EXPECT_GT(cell->getLogOdds(), 0.0f) << "the written-back change";
 }
 
 // Updates fused between the steps keep their cells: every cell of a map that

@@ -26,7 +26,7 @@ struct MaintainResult {
 /// When maintain() merges the changed tiles' equal leaves.
 enum class MergeTiming {
   kNow,     ///< all in the call
-  kSpread,  ///< queued: mergeStep() merges them over the next kMergeSteps calls
+  kSpread,  ///< queued: mergeStep() merges them over the next mergeSteps() calls
 };
 
 /// MapAccumulator + TileStore. Not thread-safe, as MapAccumulator; the
@@ -34,8 +34,13 @@ enum class MergeTiming {
 class MissionMap {
  public:
   using TileIndex = MapAccumulator::TileIndex;
-  /// mergeStep() calls over which maintain(MergeTiming::kSpread)'s merges are spread.
+  /// The fewest mergeStep() calls over which maintain(MergeTiming::kSpread)'s merges are spread.
   static constexpr size_t kMergeSteps = 16;
+  /// The merges are spread over 1/kMergeShare of the updates integrated
+  /// between the last two maintain() calls (when that is more than
+  /// kMergeSteps): at a higher frame rate each step is smaller, and the
+  /// queue still ends before the next maintain() if the rate halves.
+  static constexpr size_t kMergeShare = 2;
 
   /// @throws std::invalid_argument if the config is not valid.
   explicit MissionMap(const MapAccumulatorConfig& config);
@@ -65,13 +70,16 @@ class MissionMap {
   /// when its node merges differs); merges still queued from an earlier
   /// call are done first.
   MaintainResult maintain(MergeTiming merges = MergeTiming::kNow);
-  /// One kMergeSteps-th of the merges maintain(MergeTiming::kSpread) queued,
+  /// One mergeSteps()-th of the merges maintain(MergeTiming::kSpread) queued,
   /// a part (AccumulatingOcTree::kPartDepth node) at a time, so that no
   /// update waits for a whole map's merges and their frees. Nothing when
   /// none are queued.
   MaintainResult mergeStep();
   /// True while merges wait for mergeStep().
   bool mergesQueued() const { return !queued_merges_.empty(); }
+  /// The mergeStep() calls the last maintain(MergeTiming::kSpread) spread
+  /// its merges over: kMergeSteps, or more (kMergeShare); 0 before one.
+  size_t mergeSteps() const { return merge_steps_; }
   /// True once after maintain() moved tiles to the store or merged leaves,
   /// or after the last mergeStep() of a queue that merged some (with a
   /// store): their memory is free, but the allocator keeps it from the
@@ -142,7 +150,9 @@ class MissionMap {
     size_t next = 0;
   };
   std::deque<QueuedMerge> queued_merges_;  ///< in the order maintain() met the tiles
-  size_t parts_per_step_ = 0;              ///< a kMergeSteps-th of the queue's parts, at least 1
+  size_t parts_per_step_ = 0;              ///< a merge_steps_-th of the queue's parts, at least 1
+  size_t merge_steps_ = 0;                 ///< see mergeSteps()
+  size_t updates_since_maintain_ = 0;      ///< integrate() calls that fused, since the last maintain()
   size_t spread_merged_ = 0;               ///< nodes the queue's steps merged so far (freed_memory_ when it empties)
   /// The live map's kept box grown by kPruneSlack · max_extent_m; empty before the first update.
   Eigen::AlignedBox3d window() const;
