@@ -181,6 +181,9 @@ struct RangeProfile {
   /// at() adds it in the cell's window, a line drawing draws it into the cell
   /// that holds the measured point (LineDrawer).
   float hit_log_odds = 0.0f;
+  /// The table's rows as one step (kSurface: each row free up to this
+  /// sample and 0 after it, every row alike), or -1 (kGaussian): see stepSample().
+  int step_sample = -1;
 
   /// Range up to which a line must be drawn [m].
   float endRange() const { return l_p_m + tail_m; }
@@ -213,6 +216,14 @@ struct RangeProfile {
     const float v0 = r0[0] + frac * (r0[1] - r0[0]);
     const float v1 = r1[0] + frac * (r1[1] - r1[0]);
     return v0 + row_weight * (v1 - v0);
+  }
+
+  /// sample(x) for step_sample >= 0, bit for bit, without the interpolation
+  /// but at the step: below it both samples and both rows hold the free
+  /// value, above it 0, and adding frac · 0 or row_weight · 0 changes nothing.
+  float stepSample(float x) const {
+    const int j = static_cast<int>(x);
+    return j < step_sample ? row[0] : (j > step_sample ? 0.0f : sample(x));
   }
 };
 
@@ -287,6 +298,7 @@ class LogOddsTable {
   float hit_log_odds_;  ///< RangeProfile::hit_log_odds
   float sky_log_odds_;  ///< of freeProfile(): a ray that measured no range
   std::vector<float> values_;
+  int step_sample_ = -1;  ///< RangeProfile::step_sample
 };
 
 /// True if disparity @p d_px measures a range; false for zero and for a

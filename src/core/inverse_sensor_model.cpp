@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #include "stereo_occupancy/stereo_camera_model.h"
@@ -74,6 +75,23 @@ double InverseSensorModel::logOddsHatSampled(double l_m, double l_p_m, double de
   return best;
 }
 
+namespace {
+/// RangeProfile::step_sample of a table: the last sample of a nonzero value
+/// in rows that hold it up to there and +0 after it, all rows alike; -1 if
+/// the rows are not so.
+int lastSampleOfStep(const std::vector<float>& values, int row_length) {
+  const float* first = values.data();
+  if (values.empty() || first[0] == 0.0f) return -1;
+  int step = 0;
+  while (step + 1 < row_length && first[step + 1] == first[0]) ++step;
+  for (int j = step + 1; j < row_length; ++j)
+    if (first[j] != 0.0f || std::signbit(first[j])) return -1;
+  for (size_t i = static_cast<size_t>(row_length); i < values.size(); i += static_cast<size_t>(row_length))
+    if (std::memcmp(first, &values[i], sizeof(float) * static_cast<size_t>(row_length)) != 0) return -1;
+  return step + 1 < row_length ? step : -1;
+}
+}  // namespace
+
 LogOddsTable::LogOddsTable(const InverseSensorModel& model, double cell_size_m)
     : cell_size_m_(cell_size_m),
       tail_sigmas_(model.config().profile == SensorProfile::kSurface
@@ -109,6 +127,7 @@ LogOddsTable::LogOddsTable(const InverseSensorModel& model, double cell_size_m)
       row[j] = static_cast<float>(std::log(p / (1.0 - p)));              // eq. 8
     }
   }
+  step_sample_ = lastSampleOfStep(values_, row_length_);
 }
 
 RangeProfile LogOddsTable::profile(float l_p_m, float delta_l_m) const {
@@ -130,6 +149,7 @@ RangeProfile LogOddsTable::profile(float l_p_m, float delta_l_m) const {
   p.tail_m = tailOf(delta_l_m);
   p.free_log_odds = free_log_odds_;
   p.hit_log_odds = hit_log_odds_;
+  p.step_sample = step_sample_;
   return p;
 }
 

@@ -107,6 +107,36 @@ TEST(SurfaceProfile, ExactModelAndTableAgree) {
   EXPECT_NEAR(paper.freeProfile().at(10.0f), logit(0.35), 1e-6);
 }
 
+// The surface profile's table is one step (free, then 0): stepSample(), which
+// the lines' windows use, gives sample()'s value bit for bit at every
+// position and gap width; the paper's profile has no step.
+TEST(SurfaceProfile, StepSampleIsTheTablesSample) {
+  for (double gap : {0.0, 0.4, 1.0, 2.5, 3.9}) {
+    InverseSensorModelConfig c = surfaceConfig();
+    c.free_gap_sigmas = gap;
+    const LogOddsTable table(InverseSensorModel(c), kCell);
+    for (float dl : {0.02f, 0.6f, 3.0f}) {
+      const RangeProfile profile = table.profile(15.0f, dl);
+      ASSERT_GE(profile.step_sample, 0) << gap;
+      EXPECT_EQ(profile.row[0], table.freeLogOdds());
+      const float last = (LogOddsTable::kFrontSigmas + LogOddsTable::kTailSigmas) * LogOddsTable::kSamplesPerSigma;
+      size_t free = 0, zero = 0, between = 0;
+      for (float x = 0.0f; x <= last; x = std::nextafter(x + 1.0f / 64.0f, last + 1.0f)) {
+        const float a = profile.sample(x), b = profile.stepSample(x);
+        ASSERT_EQ(std::memcmp(&a, &b, sizeof(float)), 0) << "x " << x << " gap " << gap << ": " << a << " " << b;
+        free += a == table.freeLogOdds();
+        zero += a == 0.0f;
+        between += a != 0.0f && a != table.freeLogOdds();
+      }
+      EXPECT_GT(free, 0u);
+      EXPECT_GT(zero, 0u);
+      EXPECT_GT(between, 0u) << "the step's own sample interpolates";
+    }
+  }
+  const LogOddsTable paper(InverseSensorModel(InverseSensorModelConfig()), kCell);
+  EXPECT_EQ(paper.profile(15.0f, 0.6f).step_sample, -1);
+}
+
 // The bounded pyramid's bound: a nearer pixel must lie where the far line
 // does not call it free, that is within c/2 + the gap.
 TEST(SurfaceProfile, BoundReachesOverTheGap) {
