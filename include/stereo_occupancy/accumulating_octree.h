@@ -184,10 +184,12 @@ class AccumulatingOcTree : public octomap::OcTree {
   /// leaves of one value.
   using BeforeMerge = std::function<void(const octomap::OcTreeKey& lo, unsigned depth)>;
   /// pruneBelow(key, depth, deepest) with @p before_merge called for each
-  /// node about to merge (the same nodes merge as after @p before_merge's
-  /// changes everywhere first, provided it only adds detail: it never
-  /// merges, and it changes nothing outside the node it is called for).
-  /// @p key is the lowest key of the node at @p depth.
+  /// node about to merge. The same nodes merge as after @p before_merge's
+  /// changes everywhere first, provided that it changes only cells of the
+  /// node's own subtree that lie below the node's children (as cells of
+  /// depth 16 do below nodes up to depth 14): such a change expands a child
+  /// and can only keep the node from merging. @p key is the lowest key of
+  /// the node at @p depth.
   size_t pruneBelow(const octomap::OcTreeKey& key, unsigned depth, unsigned deepest, const BeforeMerge& before_merge);
 
   /// The keys of the nodes at @p part_depth below the node of @p key at
@@ -207,6 +209,8 @@ class AccumulatingOcTree : public octomap::OcTree {
   /// Frees everything below @p node, which becomes a leaf: octomap frees a
   /// node's child array only in pruneNode(), so each level is made prunable.
   void collapse(octomap::OcTreeNode* node);
+  /// The node of @p key at @p depth; null if there is none, or a coarser leaf holds the key.
+  octomap::OcTreeNode* nodeOnPath(const octomap::OcTreeKey& key, unsigned depth);
   /// pruneBelow()'s merges with @p before_merge, below @p node (lowest key @p lo, at @p depth).
   size_t mergeUp(octomap::OcTreeNode* node, const octomap::OcTreeKey& lo, unsigned depth, unsigned deepest,
                  const BeforeMerge& before_merge);

@@ -56,15 +56,21 @@ bool AccumulatingOcTree::dropNode(const octomap::OcTreeKey& key, unsigned depth)
   return true;
 }
 
-size_t AccumulatingOcTree::pruneBelow(const octomap::OcTreeKey& key, unsigned depth, unsigned deepest) {
-  if (!root || depth > tree_depth) return 0;
-  deepest = std::min(deepest, tree_depth - 1);
+octomap::OcTreeNode* AccumulatingOcTree::nodeOnPath(const octomap::OcTreeKey& key, unsigned depth) {
+  if (!root || depth > tree_depth) return nullptr;
   octomap::OcTreeNode* node = root;
   for (unsigned d = 0; d < depth; ++d) {
     const unsigned pos = octomap::computeChildIdx(key, static_cast<int>(tree_depth - 1 - d));
-    if (!nodeChildExists(node, pos)) return 0;  // nothing there, or a coarser leaf
+    if (!nodeChildExists(node, pos)) return nullptr;  // nothing there, or a coarser leaf
     node = getNodeChild(node, pos);
   }
+  return node;
+}
+
+size_t AccumulatingOcTree::pruneBelow(const octomap::OcTreeKey& key, unsigned depth, unsigned deepest) {
+  octomap::OcTreeNode* node = nodeOnPath(key, depth);
+  if (!node) return 0;
+  deepest = std::min(deepest, tree_depth - 1);
   size_t merged = 0;
   // Each level from the leaves' parents up: a node merged at one level may
   // make its parent mergeable at the next (as prune(), without its early end).
@@ -78,15 +84,8 @@ size_t AccumulatingOcTree::pruneBelow(const octomap::OcTreeKey& key, unsigned de
 
 size_t AccumulatingOcTree::pruneBelow(const octomap::OcTreeKey& key, unsigned depth, unsigned deepest,
                                       const BeforeMerge& before_merge) {
-  if (!root || depth > tree_depth) return 0;
-  deepest = std::min(deepest, tree_depth - 1);
-  octomap::OcTreeNode* node = root;
-  for (unsigned d = 0; d < depth; ++d) {
-    const unsigned pos = octomap::computeChildIdx(key, static_cast<int>(tree_depth - 1 - d));
-    if (!nodeChildExists(node, pos)) return 0;  // nothing there, or a coarser leaf
-    node = getNodeChild(node, pos);
-  }
-  return mergeUp(node, key, depth, deepest, before_merge);
+  octomap::OcTreeNode* node = nodeOnPath(key, depth);
+  return node ? mergeUp(node, key, depth, std::min(deepest, tree_depth - 1), before_merge) : 0;
 }
 
 size_t AccumulatingOcTree::mergeUp(octomap::OcTreeNode* node, const octomap::OcTreeKey& lo, unsigned depth,

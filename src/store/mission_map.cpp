@@ -252,6 +252,8 @@ void MissionMap::reset() {
   queued_merges_.clear();
   spread_merged_ = 0;
   updates_since_maintain_ = 0;
+  merge_steps_ = 0;
+  parts_per_step_ = 0;
   resident_.clear();
   unsaved_.clear();
   unpublished_.clear();
@@ -265,6 +267,8 @@ void MissionMap::load(const std::string& path) {
   queued_merges_.clear();
   spread_merged_ = 0;
   updates_since_maintain_ = 0;
+  merge_steps_ = 0;
+  parts_per_step_ = 0;
   resident_.clear();
   unsaved_.clear();
   unpublished_.clear();

@@ -283,8 +283,8 @@ TEST_F(PipelineTest, UpdatesThatNeverArriveAreCounted) {
   EXPECT_EQ(fusion.counters().lost, 2u);
 }
 
-// compress_map's merges come after the maintain, over the next
-// MissionMap::kMergeSteps updates, not in the update that maintains: the
+// compress_map's merges come after the maintain, over the next updates
+// (here MissionMap::kMergeSteps: 22 updates before it), not in the update that maintains: the
 // map then has fewer leaves than one that never merges, and every cell its value.
 TEST_F(PipelineTest, TheMergesAreSpreadOverTheNextUpdates) {
   OctomapAccumulatorParameters params;
@@ -304,12 +304,13 @@ TEST_F(PipelineTest, TheMergesAreSpreadOverTheNextUpdates) {
     ASSERT_TRUE(plain.fuse(*update, &why)) << why;
     const size_t leaves = fusion.map().tree().getNumLeafNodes();
     if (k <= maintaining) EXPECT_EQ(leaves, plain.map().tree().getNumLeafNodes()) << "update " << k;
-    // kMergeSteps steps at most (fewer when the parts do not divide evenly).
+    // mergeSteps() steps at most (fewer when the parts do not divide evenly).
     const int steps_done = k - maintaining;
     if (k < maintaining) EXPECT_FALSE(fusion.mission().mergesQueued()) << "update " << k;
     if (steps_done >= 0 && steps_done < static_cast<int>(MissionMap::kMergeSteps) / 2)
       EXPECT_TRUE(fusion.mission().mergesQueued()) << "update " << k;
   }
+  EXPECT_EQ(fusion.mission().mergeSteps(), MissionMap::kMergeSteps);
   EXPECT_FALSE(fusion.mission().mergesQueued());
   const octomap::OcTree& merged = fusion.map().tree();
   EXPECT_LT(merged.getNumLeafNodes(), plain.map().tree().getNumLeafNodes() * 3 / 4);

@@ -378,6 +378,13 @@ TEST(MissionMap, SpreadMergesEndInTheTreeOfOneMerge) {
   for (int i = 0; i < 3; ++i) ASSERT_TRUE(spread.integrate(singleCell(Eigen::Vector3i(200, i, 0), 2.0f)));
   spread.maintain(MergeTiming::kSpread);
   EXPECT_EQ(spread.mergeSteps(), MissionMap::kMergeSteps);
+  // A reset map counts its updates afresh.
+  flyOverTwoTiles(&spread);
+  spread.reset();
+  EXPECT_EQ(spread.mergeSteps(), 0u);
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(spread.integrate(singleCell(Eigen::Vector3i(200, i, 0), 2.0f)));
+  spread.maintain(MergeTiming::kSpread);
+  EXPECT_EQ(spread.mergeSteps(), MissionMap::kMergeSteps);
 }
 
 // The merges above the parts write back only the fusion's blocks below a
@@ -417,6 +424,28 @@ TEST(MissionMap, MergesAboveThePartsWriteBackOnlyBelowNodesAboutToMerge) {
       lazy.live().tree().search(lazy.live().tree().coordToKey(300.5 * kRes, 40.5 * kRes, 20.5 * kRes));
   ASSERT_NE(cell, nullptr);
   EXPECT_GT(cell->getLogOdds(), 0.0f) << "the written-back change";
+}
+
+// As above, for nodes nearer the tile: two 64-cell cubes of free space
+// (depth-10 nodes) whose lowest keys set bits 7 and 6, so that the child
+// keys on their paths are not the first ones. The change in the second cube
+// lies below nodes about to merge: found, written back, it keeps them from
+// merging; the first cube merges into one leaf.
+TEST(MissionMap, MergesAboveThePartsFindTheBlocksBelowEachNode) {
+  MissionMap lazy{MapAccumulatorConfig()}, eager{MapAccumulatorConfig()};
+  const GridUpdate cubes = filledBox(Eigen::Vector3i(128, 192, 192), Eigen::Vector3i(128, 64, 64), -0.4f);
+  const std::vector<MapAccumulator::TileIndex> tiles = lazy.live().tilesOf(cubes);
+  ASSERT_EQ(tiles.size(), 1u);
+  for (MissionMap* m : {&lazy, &eager}) {
+    ASSERT_TRUE(m->integrate(cubes));
+    for (const auto& part : m->live().partsToMerge(tiles[0])) m->live().mergePart(part);
+    ASSERT_TRUE(m->integrate(singleCell(Eigen::Vector3i(230, 250, 197), 2.0f)));
+  }
+  eager.live().tree();  // every block written back
+  const size_t merged = lazy.live().mergeTileAbove(tiles[0]);
+  EXPECT_EQ(merged, eager.live().mergeTileAbove(tiles[0]));
+  EXPECT_EQ(merged, 9u + 7u) << "the first cube: 8 nodes of depth 11 and the cube; the second: 7 of its 8";
+  EXPECT_EQ(fullBytes(lazy.live().tree()), fullBytes(eager.live().tree()));
 }
 
 // Updates fused between the steps keep their cells: every cell of a map that

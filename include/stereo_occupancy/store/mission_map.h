@@ -38,8 +38,9 @@ class MissionMap {
   static constexpr size_t kMergeSteps = 16;
   /// The merges are spread over 1/kMergeShare of the updates integrated
   /// between the last two maintain() calls (when that is more than
-  /// kMergeSteps): at a higher frame rate each step is smaller, and the
-  /// queue still ends before the next maintain() if the rate halves.
+  /// kMergeSteps): at a higher frame rate each step is smaller, and if the
+  /// rate halves the queue ends about when the next maintain() comes (which
+  /// does what is left).
   static constexpr size_t kMergeShare = 2;
 
   /// @throws std::invalid_argument if the config is not valid.
@@ -78,7 +79,8 @@ class MissionMap {
   /// True while merges wait for mergeStep().
   bool mergesQueued() const { return !queued_merges_.empty(); }
   /// The mergeStep() calls the last maintain(MergeTiming::kSpread) spread
-  /// its merges over: kMergeSteps, or more (kMergeShare); 0 before one.
+  /// its merges over: kMergeSteps, or more (kMergeShare); 0 before one (and
+  /// after reset() or load()).
   size_t mergeSteps() const { return merge_steps_; }
   /// True once after maintain() moved tiles to the store or merged leaves,
   /// or after the last mergeStep() of a queue that merged some (with a
