@@ -55,6 +55,27 @@ size_t nextSetFlag(const uint8_t* flags, size_t b, size_t last) {
   return last;
 }
 
+/// Bit j set if cells[j] (j < 4) equals @p a, @p b or @p c (SSE2 or NEON
+/// where available; a NaN matches nothing).
+inline uint32_t equalMask4(const float* cells, float a, float b, float c) {
+#if defined(__SSE2__)
+  const __m128 v = _mm_loadu_ps(cells);
+  const __m128 hit = _mm_or_ps(_mm_or_ps(_mm_cmpeq_ps(v, _mm_set1_ps(a)), _mm_cmpeq_ps(v, _mm_set1_ps(b))),
+                               _mm_cmpeq_ps(v, _mm_set1_ps(c)));
+  return static_cast<uint32_t>(_mm_movemask_ps(hit));
+#elif defined(STEREO_OCCUPANCY_NEON_BLOCKS)
+  const float32x4_t v = vld1q_f32(cells);
+  const uint32x4_t hit =
+      vorrq_u32(vorrq_u32(vceqq_f32(v, vdupq_n_f32(a)), vceqq_f32(v, vdupq_n_f32(b))), vceqq_f32(v, vdupq_n_f32(c)));
+  const uint32_t lane_bits[4] = {1, 2, 4, 8};
+  return vaddvq_u32(vandq_u32(hit, vld1q_u32(lane_bits)));
+#else
+  uint32_t mask = 0;
+  for (int j = 0; j < 4; ++j) mask |= static_cast<uint32_t>(cells[j] == a || cells[j] == b || cells[j] == c) << j;
+  return mask;
+#endif
+}
+
 /// True if cell @p f lies in front of cell @p hit as seen from @p grid_camera:
 /// at least half a cell nearer along the ray through the hit's centre (the
 /// free space its own measurement and the views of it clear), not beside it.
@@ -172,16 +193,23 @@ size_t GuardPass::guardSlabs(const Guard& guard, int axis, int begin, int end, c
           continue;
         }
         const int dist_jk = std::max(std::abs(j - y), std::abs(k - z));
-        for (int h = h_begin; h <= h_end; ++h) {
+        auto markCell = [&](int h) {
           float& cell = row[h];
           const bool sky = cell == guard.sky_value, gap = cell == guard.gap_value, edge = cell == guard.edge_value;
-          if (!sky && !gap && !edge) continue;
+          if (!sky && !gap && !edge) return;
           const int reach = sky ? guard.sky_radius : gap ? guard.gap_radius : guard.edge_radius;
-          if (reach < radius && std::max({x0 - h, h - x1, dist_jk}) > reach) continue;  // Chebyshev to the run
-          if (edge && !besideRun(h, j, k, x0, x1, y, z)) continue;
+          if (reach < radius && std::max({x0 - h, h - x1, dist_jk}) > reach) return;  // Chebyshev to the run
+          if (edge && !besideRun(h, j, k, x0, x1, y, z)) return;
           cell = gap ? kKeepMark : silenced;
           ++marked;
-        }
+        };
+        // Most cells hold none of the values: four at a time, then the
+        // candidates in order (marking a cell changes no other's test).
+        int h = h_begin;
+        for (; h + 4 <= h_end + 1; h += 4)
+          for (uint32_t m = equalMask4(row + h, guard.sky_value, guard.gap_value, guard.edge_value); m != 0; m &= m - 1)
+            markCell(h + __builtin_ctz(m));
+        for (; h <= h_end; ++h) markCell(h);
       }
   };
   // The runs of occupied cells in the block of row (y, z) from x_begin, cut
