@@ -166,6 +166,10 @@ class InverseSensorModel {
 /// L̂ along one ray, as served by LogOddsTable: a view into two table rows.
 /// Cheap to copy; valid while the table lives.
 struct RangeProfile {
+  /// sample() keeps x within [kMinSampleX, kMaxSampleX]: its reads stay in
+  /// the row's samples and padding (LogOddsTable checks the bounds).
+  static constexpr float kMinSampleX = -0.99999994f;           // the float next to -1 towards 0
+  static constexpr float kMaxSampleX = 224.9999847412109375f;  // the float next to the last sample + 1 towards 0
   const float* row = nullptr;                            ///< row of the peak probability just below this measurement's
   int row_length = 0;                                    ///< offset to the next row (just above)
   float row_weight = 0.0f;                               ///< interpolation weight of the next row
@@ -207,8 +211,12 @@ struct RangeProfile {
   }
 
   /// The table at fractional sample x = (e - row_origin_m) · samples_per_m,
-  /// 0 <= x <= (kFrontSigmas + kTailSigmas) · kSamplesPerSigma.
+  /// 0 <= x <= (kFrontSigmas + kTailSigmas) · kSamplesPerSigma. An x
+  /// outside (-1, that + 1) (float cancellation at a Δl far below the range's
+  /// rounding, from a hostile camera; NaN) reads the table's nearest end
+  /// instead of memory beyond it.
   float sample(float x) const {
+    x = std::min(kMaxSampleX, std::max(kMinSampleX, x));  // NaN: kMinSampleX
     const int j = static_cast<int>(x);
     const float frac = x - static_cast<float>(j);
     const float* r0 = row + j;
@@ -218,12 +226,14 @@ struct RangeProfile {
     return v0 + row_weight * (v1 - v0);
   }
 
-  /// sample(x) for step_sample >= 0, bit for bit, without the interpolation
-  /// but at the step: below it both samples and both rows hold the free
-  /// value, above it 0, and adding frac · 0 or row_weight · 0 changes nothing.
+  /// sample(x) for step_sample >= 0 and x >= 0, bit for bit, without the
+  /// interpolation but at the step: below it both samples and both rows hold
+  /// the free value, above it 0, and adding frac · 0 or row_weight · 0
+  /// changes nothing. Compared in float, not by the sample's index, so that
+  /// no x (NaN goes to sample()) reads beyond the table.
   float stepSample(float x) const {
-    const int j = static_cast<int>(x);
-    return j < step_sample ? row[0] : (j > step_sample ? 0.0f : sample(x));
+    const float step = static_cast<float>(step_sample);
+    return x < step ? row[0] : (x >= step + 1.0f ? 0.0f : sample(x));
   }
 };
 
@@ -244,6 +254,9 @@ class LogOddsTable {
   static constexpr float kTailSigmas = 3.0f;
   static constexpr int kSamplesPerSigma = 32;
   static constexpr int kPeakRows = 41;
+  static_assert(RangeProfile::kMaxSampleX < (kFrontSigmas + kTailSigmas) * kSamplesPerSigma + 1.0f &&
+                    RangeProfile::kMaxSampleX > (kFrontSigmas + kTailSigmas) * kSamplesPerSigma,
+                "sample() reads samples j and j + 1 <= the row's padding");
   /// Δl below this is taken as this [m] (eq. 7 gives 6e-4 m at 0.5 m range).
   static constexpr float kMinDeltaL = 1e-6f;
   /// Largest Δl a profile is built with [m]: far beyond any grid, and small

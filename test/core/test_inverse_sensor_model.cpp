@@ -139,6 +139,33 @@ TEST(LogOddsTable, HugeOrUndefinedRangeUncertaintyStaysFinite) {
   }
 }
 
+// A window position far outside the table (float cancellation in l - l_p at
+// a Δl of 1e-6 m and a range of 300 m, as a hostile camera can give, put it
+// at 1495) reads the table's nearest end, not memory beyond it (the
+// sanitizer runs check the reads); inside the table nothing changes.
+TEST(LogOddsTable, SamplesFarOutsideTheTableReadItsEnds) {
+  const LogOddsTable table(fig1Model(), 0.25);
+  const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+  const RangeProfile p = table.profile(300.0f, 0.6f);
+  const float low = p.sample(RangeProfile::kMinSampleX), high = p.sample(RangeProfile::kMaxSampleX);
+  ASSERT_TRUE(std::isfinite(low) && std::isfinite(high));
+  for (float x : {-1.0f, -5.0f, -1e9f, -inf, nan}) EXPECT_EQ(p.sample(x), low) << x;
+  for (float x : {225.0f, 1495.0f, 1e9f, 3e9f, inf}) EXPECT_EQ(p.sample(x), high) << x;
+  for (float x : {0.0f, 0.5f, 100.25f, 224.0f, 224.5f}) {
+    const int j = static_cast<int>(x);
+    const float frac = x - static_cast<float>(j);
+    const float v0 = p.row[j] + frac * (p.row[j + 1] - p.row[j]);
+    const float v1 = p.row[j + p.row_length] + frac * (p.row[j + 1 + p.row_length] - p.row[j + p.row_length]);
+    EXPECT_EQ(p.sample(x), v0 + p.row_weight * (v1 - v0)) << x;
+  }
+  InverseSensorModelConfig surface;
+  surface.profile = SensorProfile::kSurface;
+  const RangeProfile step = LogOddsTable(InverseSensorModel(surface), 0.25).profile(300.0f, 0.6f);
+  ASSERT_GE(step.step_sample, 0);
+  for (float x : {225.0f, 1495.0f, 3e9f, inf}) EXPECT_EQ(step.stepSample(x), 0.0f) << x;
+  for (float x : {-1.0f, -3e9f, -inf}) EXPECT_EQ(step.stepSample(x), step.row[0]) << x;
+}
+
 // The bounded descent asks only where a measurement's free space ends:
 // frontRange() is the whole profile's l_p_m + front_m, bit for bit, for
 // ordinary, tiny, huge and undefined Δl.
