@@ -160,7 +160,8 @@ TEST(LogOddsTable, SamplesFarOutsideTheTableReadItsEnds) {
   }
   InverseSensorModelConfig surface;
   surface.profile = SensorProfile::kSurface;
-  const RangeProfile step = LogOddsTable(InverseSensorModel(surface), 0.25).profile(300.0f, 0.6f);
+  const LogOddsTable surface_table(InverseSensorModel(surface), 0.25);  // outlives the profile's view
+  const RangeProfile step = surface_table.profile(300.0f, 0.6f);
   ASSERT_GE(step.step_sample, 0);
   for (float x : {225.0f, 1495.0f, 3e9f, inf}) EXPECT_EQ(step.stepSample(x), 0.0f) << x;
   for (float x : {-1.0f, -3e9f, -inf}) EXPECT_EQ(step.stepSample(x), step.row[0]) << x;
