@@ -7,6 +7,13 @@
 #include <stdexcept>
 #include <vector>
 
+// The encoding's masks in AVX2's eight lanes where the CPU has them: one
+// function for each, chosen once (the loader's ifunc, as target_clones).
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__linux__)
+#define STEREO_OCCUPANCY_AVX2_MASKS 1
+#include <immintrin.h>
+#endif
+
 namespace stereo_occupancy {
 
 bool GridUpdateView::isConsistent(std::string* why) const {
@@ -53,31 +60,54 @@ constexpr size_t kEncodeChunkCells = size_t{1} << 16;
 /// True if a cell carries information: known and not exactly 0.
 inline bool informative(float v) { return v != LocalGrid::kUnknown && v != 0.0f; }
 
+/// Blocks whose masks masksOf() computes in one call (a stack array).
+constexpr size_t kMaskBatch = 256;
+
+/// informationMask() of @p blocks whole blocks from @p cells.
+#if STEREO_OCCUPANCY_AVX2_MASKS
+__attribute__((target("default")))
+#endif
+void masksOf(const float* cells, size_t blocks, uint16_t* masks) {
+  for (size_t b = 0; b < blocks; ++b) masks[b] = static_cast<uint16_t>(informationMask(cells + b * kInformationBlock));
+}
+
+#if STEREO_OCCUPANCY_AVX2_MASKS
+/// The same, eight cells a lane group: the same compares (not equal,
+/// unordered: NaN holds information, as in _mm_cmpneq_ps).
+__attribute__((target("avx2"))) void masksOf(const float* cells, size_t blocks, uint16_t* masks) {
+  static_assert(kInformationBlock == 16, "two groups of eight lanes");
+  const __m256 unknown = _mm256_set1_ps(LocalGrid::kUnknown), zero = _mm256_setzero_ps();
+  for (size_t b = 0; b < blocks; ++b) {
+    const __m256 lo = _mm256_loadu_ps(cells + b * kInformationBlock);
+    const __m256 hi = _mm256_loadu_ps(cells + b * kInformationBlock + 8);
+    const int lo_bits = _mm256_movemask_ps(
+        _mm256_and_ps(_mm256_cmp_ps(lo, unknown, _CMP_NEQ_UQ), _mm256_cmp_ps(lo, zero, _CMP_NEQ_UQ)));
+    const int hi_bits = _mm256_movemask_ps(
+        _mm256_and_ps(_mm256_cmp_ps(hi, unknown, _CMP_NEQ_UQ), _mm256_cmp_ps(hi, zero, _CMP_NEQ_UQ)));
+    masks[b] = static_cast<uint16_t>(lo_bits | (hi_bits << 8));
+  }
+}
+#endif
+
 /// The runs of informative cells in [begin, end) of @p data (begin a
 /// multiple of kInformationBlock), appended to @p start and @p length;
 /// returns the cells they cover.
 size_t findRuns(const float* data, size_t begin, size_t end, std::vector<uint32_t>* start,
                 std::vector<uint32_t>* length) {
   // kInformationBlock cells at a time as a bit mask: a run's ends are the
-  // mask's changes (no branch per cell), and a block all empty or all in a
-  // run costs one compare.
+  // mask's changes (no branch per cell). The masks of a batch of whole
+  // blocks come first, in a loop of their own (in vector lanes); then four
+  // blocks all empty or all in a run cost one compare.
   constexpr uint32_t kFull = (uint32_t{1} << kInformationBlock) - 1;
+  constexpr uint64_t kFourFull = 0xffffffffffffffffULL;  // four kFull masks
   size_t cells = 0, first = 0;
   bool in_run = false;
-  for (size_t i = begin; i < end; i += kInformationBlock) {
-    const size_t n = std::min<size_t>(kInformationBlock, end - i);
-    uint32_t mask = 0;
-    if (n == kInformationBlock) {
-      mask = informationMask(data + i);
-    } else {
-      for (size_t j = 0; j < n; ++j) mask |= static_cast<uint32_t>(informative(data[i + j])) << j;
-    }
-    if (mask == (in_run ? kFull : 0u)) continue;
-    const uint32_t within = n == kInformationBlock ? kFull : (uint32_t{1} << n) - 1;
-    for (uint32_t j = 0; j < n;) {
-      // The next cell from j where the run state changes.
+  // The changes of run state in the block of cells from i (mask: its
+  // informative cells, within: the cells it has).
+  auto addChanges = [&](size_t i, uint32_t mask, uint32_t within) {
+    for (uint32_t j = 0;;) {
       const uint32_t changes = (in_run ? ~mask : mask) & within & (kFull << j);
-      if (changes == 0) break;
+      if (changes == 0) return;
       j = static_cast<uint32_t>(__builtin_ctz(changes));
       if (in_run) {
         start->push_back(static_cast<uint32_t>(first));
@@ -88,6 +118,30 @@ size_t findRuns(const float* data, size_t begin, size_t end, std::vector<uint32_
       }
       in_run = !in_run;
     }
+  };
+  uint16_t masks[kMaskBatch];
+  const size_t whole_end = begin + (end - begin) / kInformationBlock * kInformationBlock;
+  size_t i = begin;
+  while (i < whole_end) {
+    const size_t blocks = std::min(kMaskBatch, (whole_end - i) / kInformationBlock);
+    masksOf(data + i, blocks, masks);
+    for (size_t k = 0; k < blocks; ++k) {
+      if (k + 4 <= blocks) {
+        uint64_t four;
+        std::memcpy(&four, masks + k, sizeof four);
+        if (four == (in_run ? kFourFull : 0)) {
+          k += 3;
+          continue;
+        }
+      }
+      if (masks[k] != (in_run ? kFull : 0u)) addChanges(i + k * kInformationBlock, masks[k], kFull);
+    }
+    i += blocks * kInformationBlock;
+  }
+  if (i < end) {  // the last, partial block
+    uint32_t mask = 0;
+    for (size_t j = 0; j < end - i; ++j) mask |= static_cast<uint32_t>(informative(data[i + j])) << j;
+    addChanges(i, mask, (uint32_t{1} << (end - i)) - 1);
   }
   if (in_run) {
     start->push_back(static_cast<uint32_t>(first));

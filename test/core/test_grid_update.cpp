@@ -109,22 +109,28 @@ TEST(GridUpdate, EncodingOnAPoolEqualsOneScan) {
 // The runs are the maximal stretches of informative cells (known, not 0),
 // cell for cell as a plain scan finds them: short runs and gaps of every
 // length around the 16-cell blocks the encoding reads at once, zeros inside
-// known stretches, and grids whose size is no multiple of 16.
+// known stretches, and grids whose size is no multiple of 16. Every other
+// round has long stretches with few zeros, so that four blocks at once are
+// all empty or all in a run, across the batches of blocks whose masks the
+// encoding computes together (4096 cells).
 TEST(GridUpdate, RunsAreThoseOfACellByCellScan) {
   std::mt19937 rng(11);
-  std::uniform_int_distribution<int> length(1, 40);
+  std::uniform_int_distribution<int> short_length(1, 40), long_length(60, 400);
   std::uniform_real_distribution<float> value(-2.0f, 3.0f);
-  for (const Eigen::Vector3i& size :
-       {Eigen::Vector3i(37, 11, 5), Eigen::Vector3i(16, 4, 2), Eigen::Vector3i(7, 1, 1), Eigen::Vector3i(200, 9, 3)}) {
+  for (const Eigen::Vector3i& size : {Eigen::Vector3i(37, 11, 5), Eigen::Vector3i(16, 4, 2), Eigen::Vector3i(7, 1, 1),
+                                      Eigen::Vector3i(200, 9, 3), Eigen::Vector3i(257, 37, 3)}) {
     for (int round = 0; round < 20; ++round) {
       LocalGrid grid;
       grid.reset(Eigen::Vector3i::Zero(), size, 0.25);
       float* cells = grid.data();
       const size_t n = grid.numCells();
+      const bool long_stretches = round % 2 == 1;
+      const unsigned zero_one_in = long_stretches ? 500 : 9;
       for (size_t i = 0; i < n;) {  // alternating stretches: known (some zeros) and unknown
-        const size_t end = std::min(n, i + static_cast<size_t>(length(rng)));
+        const int stretch = long_stretches ? long_length(rng) : short_length(rng);
+        const size_t end = std::min(n, i + static_cast<size_t>(stretch));
         const bool known = rng() % 2 == 0;
-        for (; i < end; ++i) cells[i] = !known ? LocalGrid::kUnknown : rng() % 9 == 0 ? 0.0f : value(rng);
+        for (; i < end; ++i) cells[i] = !known ? LocalGrid::kUnknown : rng() % zero_one_in == 0 ? 0.0f : value(rng);
       }
       std::vector<uint32_t> start, run_length;
       for (size_t i = 0; i < n; ++i) {
