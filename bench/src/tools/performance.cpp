@@ -135,7 +135,7 @@ int flightPath(const std::string& scenario_name, long pace_ms, int threads, bool
 /// @p scenario for each k. The messages are made beforehand (a camera
 /// driver's work).
 int wholePath(const so::FlightScenario& scenario, const std::vector<size_t>& frames, const std::string& title,
-              int threads) {
+              int threads, long pace_ms) {
   so::tools::WholePath path(threads);
   std::vector<stereo_msgs::DisparityImageConstPtr> images;
   std::map<size_t, cv::Mat> rendered;  // a frame repeated is rendered once
@@ -148,6 +148,7 @@ int wholePath(const so::FlightScenario& scenario, const std::vector<size_t>& fra
   std::vector<double> whole_ms, outside_ms;
   size_t fused = 0;
   for (const auto& image : images) {
+    if (pace_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(pace_ms));
     so::StageTimes times;
     const auto t0 = Clock::now();
     fused += path.run(image, &times);
@@ -159,7 +160,9 @@ int wholePath(const so::FlightScenario& scenario, const std::vector<size_t>& fra
   const so::TimeStatistics whole = so::TimeStatistics::of(whole_ms);
   std::cout << title << ": the whole path as the nodelets run it (FrameMapping, MapFusion; the defaults: "
             << so::toString(path.mapper().drawing.algorithm) << ", " << path.mapper().drawing.resolution_m
-            << " m cells), " << threadsText(threads) << "; " << fused << " of " << images.size()
+            << " m cells), " << threadsText(threads)
+            << (pace_ms > 0 ? "; a pause of " + std::to_string(pace_ms) + " ms before each frame" : std::string())
+            << "; " << fused << " of " << images.size()
             << " images fused. Per frame [ms]; share: of the mean whole path.\n\n"
                "| stage | mean | median | p99 | max | share |\n|---|---:|---:|---:|---:|---:|\n";
   auto row = [&](const std::string& name, const std::vector<double>& ms) {
@@ -339,14 +342,15 @@ int run(int argc, char** argv) {
       std::cout
           << "usage: performance [--repeat N] [--only STAGE] [--scenario NAME [--frame K]] | --flight NAME "
              "[--pace-ms MS]; either with [--threads N]; [--model NAME=VALUE]... [--no-spans] "
-             "[--record-changes] | --stages (--scenario NAME [--frame K] | --flight NAME) [--threads N] | --stages "
+             "[--record-changes] | --stages (--scenario NAME [--frame K] | --flight NAME [--pace-ms MS]) [--threads N] "
+             "| --stages "
              "--flight NAME --thread-rounds R\n"
              "Times the mapper's stages on the Table I frame (or frame K of a simulated flight, with its "
              "stereo effects, seed 1) at 0.25 m (median and min-max of N runs, default 21) and OctoMap's "
              "insertPointCloud on the same frame.\n"
              "--flight NAME: the core of the mapper's path, and the fusion of its update into the flight's "
              "map, on every frame of a simulated flight, with their mean, median, p99 and maximum; "
-             "--pace-ms MS sleeps MS before each frame, as between a camera's images.\n"
+             "--pace-ms MS sleeps MS before each frame, as between a camera's images (also with --stages --flight).\n"
              "--threads N: draw, blur and fuse on N threads (default 1).\n"
              "--model NAME=VALUE: a sensor model parameter of the default stage and of the flight's "
              "line_pyramid_bounded row (e.g. gap_guard_cells=1), repeatable.\n"
@@ -369,6 +373,7 @@ int run(int argc, char** argv) {
     }
   }
   if (pace_ms > 0 && flight.empty()) throw so::tools::UsageError("--pace-ms needs --flight");
+  if (pace_ms > 0 && thread_rounds > 0) throw so::tools::UsageError("--pace-ms does not go with --thread-rounds");
   if (thread_rounds > 0) {
     if (!stages || flight.empty()) throw so::tools::UsageError("--thread-rounds needs --stages --flight NAME");
     return threadRounds(flight, thread_rounds);
@@ -381,7 +386,7 @@ int run(int argc, char** argv) {
       std::vector<size_t> frames(scenario.T_W_B.size());
       for (size_t k = 0; k < frames.size(); ++k) frames[k] = k;
       return wholePath(scenario, frames, "Flight '" + flight + "', " + std::to_string(frames.size()) + " frames",
-                       threads);
+                       threads, pace_ms);
     }
     const so::FlightScenario scenario = so::tools::scenarioNamed(scenario_name);
     if (frame >= static_cast<long>(scenario.T_W_B.size()))
@@ -389,7 +394,7 @@ int run(int argc, char** argv) {
     return wholePath(
         scenario, std::vector<size_t>(static_cast<size_t>(repeat), static_cast<size_t>(frame)),
         "Frame " + std::to_string(frame) + " of flight '" + scenario_name + "', " + std::to_string(repeat) + " times",
-        threads);
+        threads, 0);
   }
   {  // a wrong --model before any stage runs
     so::DrawingConfig checked = so::DrawingConfig::mapperDefaults();
