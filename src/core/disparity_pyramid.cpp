@@ -6,6 +6,12 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
+// The first pass in AVX2's eight lanes where the CPU has them (chosen at
+// run time; the same operations lane for lane as SSE2's).
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__linux__)
+#define STEREO_OCCUPANCY_AVX2_PYRAMID 1
+#include <immintrin.h>
+#endif
 
 namespace stereo_occupancy {
 
@@ -19,11 +25,17 @@ struct MinDisparity {  // eq. 14
 #if defined(__SSE2__)
   static __m128 op4(__m128 a, __m128 b) { return _mm_min_ps(b, a); }
 #endif
+#if STEREO_OCCUPANCY_AVX2_PYRAMID
+  __attribute__((target("avx2"))) static __m256 op8(__m256 a, __m256 b) { return _mm256_min_ps(b, a); }
+#endif
 };
 struct MaxDisparity {  // eq. 16
   static float op(float a, float b) { return a < b ? b : a; }
 #if defined(__SSE2__)
   static __m128 op4(__m128 a, __m128 b) { return _mm_max_ps(b, a); }
+#endif
+#if STEREO_OCCUPANCY_AVX2_PYRAMID
+  __attribute__((target("avx2"))) static __m256 op8(__m256 a, __m256 b) { return _mm256_max_ps(b, a); }
 #endif
 };
 
@@ -99,12 +111,68 @@ reduceLanes(const __m128 (&ok)[4], const __m128 (&valid_d)[4], __m128 invalid, c
 }
 #endif
 
+#if STEREO_OCCUPANCY_AVX2_PYRAMID
+/// True if the CPU runs AVX2 (asked once).
+bool cpuHasAvx2() {
+  static const bool has = __builtin_cpu_supports("avx2");
+  return has;
+}
+
+/// reduceLanes() for eight blocks (sixteen columns of both rows) in AVX2
+/// lanes. The pairs' shuffle works within each half of the registers, which
+/// leaves the blocks in the order 0, 1, 4, 5, 2, 3, 6, 7: one permute of
+/// their 64-bit pairs puts them back.
+template <typename Reduction>
+__attribute__((target("avx2"), always_inline)) inline void reduceLanes8(const __m256 (&ok)[4],
+                                                                        const __m256 (&valid_d)[4], __m256 invalid,
+                                                                        const RowPair& r, int x) {
+  __m256 v[4];
+  for (int k = 0; k < 4; ++k) v[k] = _mm256_or_ps(valid_d[k], _mm256_andnot_ps(ok[k], invalid));
+  _mm256_storeu_ps(r.s0 + 2 * x, v[0]);
+  _mm256_storeu_ps(r.s0 + 2 * x + 8, v[1]);
+  _mm256_storeu_ps(r.s1 + 2 * x, v[2]);
+  _mm256_storeu_ps(r.s1 + 2 * x + 8, v[3]);
+  const __m256 top = Reduction::op8(_mm256_shuffle_ps(v[0], v[1], _MM_SHUFFLE(2, 0, 2, 0)),
+                                    _mm256_shuffle_ps(v[0], v[1], _MM_SHUFFLE(3, 1, 3, 1)));
+  const __m256 bottom = Reduction::op8(_mm256_shuffle_ps(v[2], v[3], _MM_SHUFFLE(2, 0, 2, 0)),
+                                       _mm256_shuffle_ps(v[2], v[3], _MM_SHUFFLE(3, 1, 3, 1)));
+  const __m256 blocks = Reduction::op8(top, bottom);
+  _mm256_storeu_ps(r.out + x,
+                   _mm256_castpd_ps(_mm256_permute4x64_pd(_mm256_castps_pd(blocks), _MM_SHUFFLE(3, 1, 2, 0))));
+}
+
+/// sanitiseAndReduceRow()'s blocks from @p x on, eight at a time in AVX2
+/// lanes with the same tests and reductions; returns the first block not done.
+template <bool kMin, bool kMax>
+__attribute__((target("avx2"))) int sanitiseAndReduceBlocks8(const float* in0, const float* in1, int cols,
+                                                             StereoCameraModel::DisparityValidity valid,
+                                                             float min_invalid_value, float max_invalid_value,
+                                                             const RowPair& min_rows, const RowPair& max_rows, int x) {
+  const __m256 zero = _mm256_setzero_ps(), lo = _mm256_set1_ps(valid.min_px), hi = _mm256_set1_ps(valid.max_px);
+  const __m256 min_invalid = _mm256_set1_ps(min_invalid_value), max_invalid = _mm256_set1_ps(max_invalid_value);
+  for (; 2 * x + 16 <= cols; x += 8) {  // eight blocks: sixteen columns of both rows
+    const __m256 d[4] = {_mm256_loadu_ps(in0 + 2 * x), _mm256_loadu_ps(in0 + 2 * x + 8), _mm256_loadu_ps(in1 + 2 * x),
+                         _mm256_loadu_ps(in1 + 2 * x + 8)};
+    __m256 ok[4], valid_d[4];
+    for (int k = 0; k < 4; ++k) {  // Lanes4::ok()
+      ok[k] = _mm256_or_ps(_mm256_cmp_ps(d[k], zero, _CMP_EQ_OQ),
+                           _mm256_and_ps(_mm256_cmp_ps(d[k], lo, _CMP_GE_OQ), _mm256_cmp_ps(d[k], hi, _CMP_LE_OQ)));
+      valid_d[k] = _mm256_and_ps(ok[k], d[k]);
+    }
+    if constexpr (kMin) reduceLanes8<MinDisparity>(ok, valid_d, min_invalid, min_rows, x);
+    if constexpr (kMax) reduceLanes8<MaxDisparity>(ok, valid_d, max_invalid, max_rows, x);
+  }
+  return x;
+}
+#endif
+
 /// Row y of level 1 and rows 2y, 2y + 1 of level 0 from the input rows
 /// @p in0 and @p in1 (the same row for an odd last one), for the min
 /// pyramid if @p min_levels is set and the max pyramid if @p max_levels
 /// is: each pair of input rows is sanitised into level 0 and reduced into
 /// a row of level 1 while it is in registers, with the pyramid's reduction
-/// (MinDisparity, MaxDisparity), four blocks at a time in SSE2 lanes; with
+/// (MinDisparity, MaxDisparity), eight blocks at a time in AVX2 lanes where
+/// the CPU has them, then four at a time in SSE2 lanes; with
 /// both, each value is loaded and tested once. NaN, negative and
 /// out-of-range values carry no information. kMin and kMax say which are
 /// set, so that one pyramid's loop has no branches for the other.
@@ -116,6 +184,11 @@ void sanitiseAndReduceRow(const float* in0, const float* in1, int cols, StereoCa
   if constexpr (kMin) min_rows = rowPair(*min_levels, y, two_rows);
   if constexpr (kMax) max_rows = rowPair(*max_levels, y, two_rows);
   int x = 0;
+#if STEREO_OCCUPANCY_AVX2_PYRAMID
+  if (cpuHasAvx2())
+    x = sanitiseAndReduceBlocks8<kMin, kMax>(in0, in1, cols, valid, kMin ? min_levels->invalid : 0.0f,
+                                             kMax ? max_levels->invalid : 0.0f, min_rows, max_rows, x);
+#endif
 #if defined(__SSE2__)
   const Lanes4 lanes(valid);
   const __m128 min_invalid = _mm_set1_ps(kMin ? min_levels->invalid : 0.0f);
