@@ -30,6 +30,37 @@ size_t staggerOf(const octomap::OcTreeKey& first) {
   return static_cast<size_t>((blockKey(first) * kGoldenRatio) >> (64 - kStaggerBits));
 }
 
+/// The clamping and occupancy thresholds of the tree a stretch updates.
+struct Thresholds {
+  float lo, hi;    ///< clamping [log-odds]
+  float occupied;  ///< classOfLogOdds()'s
+};
+
+/// Cells @p cells[c] of a stretch (of one block's row) updated by @p u[c],
+/// c in [0, n): OccupancyOcTreeBase::updateNodeLogOdds() (a new leaf starts
+/// at 0) with updateNode's early return (a leaf clamped the way of the
+/// update takes none). Bit c of the result: cell c changed; of
+/// @p class_changed: its class changed too (a new leaf's always does).
+uint32_t updateStretch(const float* u, float* cells, int n, const Thresholds& t, uint32_t* class_changed) {
+  static_assert(FusionCache::kEdge <= 32, "a stretch's cells are the bits of a 32-bit mask");
+  uint32_t taken = 0;
+  for (int c = 0; c < n; ++c) {
+    const float old = cells[c];
+    const bool created = !(old == old);
+    if (!created && ((u[c] >= 0.0f && old >= t.hi) || (u[c] <= 0.0f && old <= t.lo))) continue;
+    float value = (created ? 0.0f : old) + u[c];
+    if (value < t.lo)
+      value = t.lo;
+    else if (value > t.hi)
+      value = t.hi;
+    cells[c] = value;
+    taken |= uint32_t{1} << c;
+    if (created || classOfLogOdds(old, t.occupied) != classOfLogOdds(value, t.occupied))
+      *class_changed |= uint32_t{1} << c;
+  }
+  return taken;
+}
+
 /// Sets the cube of @p edge cells at @p offset (a block's linear index) to @p value.
 void fillCube(float* cells, int offset, int edge, float value) {
   for (int z = 0; z < edge; ++z)
@@ -199,8 +230,8 @@ size_t FusionCache::add(const GridUpdateView& update, AccumulatingOcTree* tree, 
 void FusionCache::addRowOfBlocks(const GridUpdateView& update, const AccumulatingOcTree& tree, int key_offset,
                                  int64_t y0, int64_t y1, int64_t z0, int64_t z1, bool record, size_t max_changes,
                                  RowOutput* out) {
-  const float lo = tree.getClampingThresMinLog(), hi = tree.getClampingThresMaxLog();
-  const float occupied = tree.getOccupancyThresLog();
+  const Thresholds thresholds{tree.getClampingThresMinLog(), tree.getClampingThresMaxLog(),
+                              tree.getOccupancyThresLog()};
   const int64_t nx = update.size.x(), ny = update.size.y();
   const int bx0 = (update.origin_index.x() + key_offset) >> kEdgeBits;
   const int nbx = ((update.origin_index.x() + update.size.x() - 1 + key_offset) >> kEdgeBits) - bx0 + 1;
@@ -210,6 +241,8 @@ void FusionCache::addRowOfBlocks(const GridUpdateView& update, const Accumulatin
   for (int64_t z = z0; z < z1; ++z) {
     // The plane's stretch of the row: linear indices [from, to).
     const int64_t from = (z * ny + y0) * nx, to = (z * ny + y1) * nx;
+    const auto key_z = static_cast<octomap::key_type>(z + update.origin_index.z() + key_offset);
+    const int cz = key_z & (kEdge - 1);
     // The first run that ends after from.
     size_t r = static_cast<size_t>(
         std::upper_bound(update.run_start.begin(), update.run_start.end(), static_cast<uint32_t>(from)) -
@@ -219,13 +252,12 @@ void FusionCache::addRowOfBlocks(const GridUpdateView& update, const Accumulatin
       int64_t i = std::max<int64_t>(update.run_start[r], from);
       const int64_t end = std::min<int64_t>(int64_t{update.run_start[r]} + update.run_length[r], to);
       size_t v = value_start_[r] + static_cast<size_t>(i - update.run_start[r]);
+      int64_t x = i % nx, y = (i / nx) % ny;  // then step by step along the run
       while (i < end) {
         // A row's stretch inside one block.
-        const int64_t x = i % nx, y = (i / nx) % ny;
         const octomap::OcTreeKey key(static_cast<octomap::key_type>(x + update.origin_index.x() + key_offset),
-                                     static_cast<octomap::key_type>(y + update.origin_index.y() + key_offset),
-                                     static_cast<octomap::key_type>(z + update.origin_index.z() + key_offset));
-        const int cx = key[0] & (kEdge - 1), cy = key[1] & (kEdge - 1), cz = key[2] & (kEdge - 1);
+                                     static_cast<octomap::key_type>(y + update.origin_index.y() + key_offset), key_z);
+        const int cx = key[0] & (kEdge - 1), cy = key[1] & (kEdge - 1);
         const int64_t stretch = std::min<int64_t>({end - i, kEdge - cx, nx - x});
         const int bx = (key[0] >> kEdgeBits) - bx0;
         if (bx != block_x) {
@@ -244,35 +276,24 @@ void FusionCache::addRowOfBlocks(const GridUpdateView& update, const Accumulatin
           block = known;
           block_x = bx;
         }
+        // The stretch's cells are one row of the block: their changed bits
+        // lie in one word (kEdge divides 64).
         const int base = cx + kEdge * (cy + kEdge * cz);
-        bool changed_any = false;
-        for (int64_t c = 0; c < stretch; ++c) {
-          const float u = update.log_odds[v + static_cast<size_t>(c)];
-          const int cell = base + static_cast<int>(c);
-          const float old = block->log_odds[static_cast<size_t>(cell)];
-          const bool created = !(old == old);
-          // updateNode's early return: a leaf clamped the way of the update takes none.
-          if (!created && ((u >= 0.0f && old >= hi) || (u <= 0.0f && old <= lo))) continue;
-          // OccupancyOcTreeBase::updateNodeLogOdds(), a new leaf starting at 0.
-          float value = (created ? 0.0f : old) + u;
-          if (value < lo)
-            value = lo;
-          else if (value > hi)
-            value = hi;
-          block->log_odds[static_cast<size_t>(cell)] = value;
-          block->changed[static_cast<size_t>(cell) >> 6] |= uint64_t{1} << (cell & 63);
-          changed_any = true;
-          if (!record) continue;
-          const CellClass was = created ? CellClass::kUnknown : classOfLogOdds(old, occupied);
-          const CellClass now = classOfLogOdds(value, occupied);
-          if (now == was) continue;
+        float* const cells = block->log_odds.data() + base;
+        uint32_t class_changed = 0;
+        const uint32_t taken =
+            updateStretch(&update.log_odds[v], cells, static_cast<int>(stretch), thresholds, &class_changed);
+        block->changed[static_cast<size_t>(base) >> 6] |= uint64_t{taken} << (base & 63);
+        const bool changed_any = taken != 0;
+        for (uint32_t bits = record ? class_changed : 0u; bits != 0; bits &= bits - 1) {
+          const int c = __builtin_ctz(bits);
           if (out->changes.size() >= max_changes) {
             out->overflowed = true;
             continue;
           }
-          out->changes.push_back(CellClassChange{
-              Eigen::Vector3i(key[0] + static_cast<int>(c) - key_offset, key[1] - key_offset, key[2] - key_offset),
-              now});
+          out->changes.push_back(
+              CellClassChange{Eigen::Vector3i(key[0] + c - key_offset, key[1] - key_offset, key[2] - key_offset),
+                              classOfLogOdds(cells[c], thresholds.occupied)});
         }
         if (changed_any && !block->unwritten) {
           block->unwritten = true;
@@ -280,6 +301,11 @@ void FusionCache::addRowOfBlocks(const GridUpdateView& update, const Accumulatin
         }
         v += static_cast<size_t>(stretch);
         i += stretch;
+        x += stretch;
+        if (x == nx) {  // the run goes on in the next row of the plane
+          x = 0;
+          ++y;
+        }
       }
     }
   }

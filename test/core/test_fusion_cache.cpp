@@ -1,5 +1,8 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <random>
+#include <tuple>
 #include <vector>
 
 #include "octree_text.h"
@@ -174,4 +177,63 @@ TEST(FusionCache, BatchesOnAPoolAreUpdateNodesTree) {
     ASSERT_EQ(changes[1][i].cell, changes[0][i].cell) << "change " << i;
     ASSERT_EQ(changes[1][i].now, changes[0][i].now) << "change " << i;
   }
+}
+
+// Dense updates whose rows cross blocks at odd places (stretches of 1 to 16
+// cells) and whose runs go on from one row to the next, with values that flip cells
+// between free and occupied, exact zeros, and values that reach the
+// clamping bounds: after each, the tree is updateNode's over the same adds,
+// and the class changes are each cell's, from its value before and after.
+TEST(FusionCache, StretchesTakeEachCellsUpdateAndClassChange) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> moderate(-1.5f, 1.5f);
+  octomap::OcTree plain(0.25);
+  const int offset = static_cast<int>(plain.coordToKey(0.0));
+  AccumulatingOcTree tree(0.25);
+  FusionCache cache;
+  ClassChangeLog log;
+  log.max_changes = 1 << 20;
+  const float occupied = plain.getOccupancyThresLog();
+  using Change = std::tuple<int, int, int, int>;  // cell, class
+  size_t flips = 0, clamped = 0;
+  for (int pass = 0; pass < 6; ++pass) {
+    LocalGrid grid;
+    grid.reset(Eigen::Vector3i(5 + pass, -3, 2), Eigen::Vector3i(43, 9, 5), 0.25);
+    for (int z = 0; z < 5; ++z)
+      for (int y = 0; y < 9; ++y)
+        for (int x = 0; x < 43; ++x) {
+          const unsigned kind = rng() % 16;
+          grid.at(x, y, z) = kind == 0 ? LocalGrid::kUnknown : kind == 1 ? 4.0f : kind == 2 ? -4.0f : moderate(rng);
+        }
+    GridUpdate update;
+    encodeGridUpdate(grid, Eigen::Vector3d::Zero(), &update);
+    std::vector<Change> expected;
+    update.forEachCell([&](const Eigen::Vector3i& g, float v) {
+      const octomap::OcTreeKey key(g.x() + offset, g.y() + offset, g.z() + offset);
+      const octomap::OcTreeNode* before = plain.search(key);
+      const CellClass was = before ? classOfLogOdds(before->getLogOdds(), occupied) : CellClass::kUnknown;
+      const float old = before ? before->getLogOdds() : 0.0f;
+      const float now = plain.updateNode(key, v, true)->getLogOdds();
+      clamped += before && now == old;
+      const CellClass is = classOfLogOdds(now, occupied);
+      if (is == was) return;
+      flips += was != CellClass::kUnknown;
+      expected.emplace_back(g.x(), g.y(), g.z(), static_cast<int>(is));
+    });
+    log.changes.clear();
+    std::vector<Eigen::Vector3i> touched;
+    cache.add(update, &tree, offset, &log, &touched);
+    std::vector<Change> changes;
+    for (const CellClassChange& c : log.changes)
+      changes.emplace_back(c.cell.x(), c.cell.y(), c.cell.z(), static_cast<int>(c.now));
+    std::sort(expected.begin(), expected.end());
+    std::sort(changes.begin(), changes.end());
+    ASSERT_EQ(changes, expected) << "pass " << pass;
+  }
+  EXPECT_GT(flips, 100u);    // cells that went from free to occupied or back
+  EXPECT_GT(clamped, 100u);  // updates a clamped leaf did not take
+  cache.writeBack(&tree, nullptr, nullptr);
+  tree.updateInnerOccupancy();
+  plain.updateInnerOccupancy();
+  EXPECT_TRUE(fullTree(tree) == fullTree(plain));
 }
