@@ -3,11 +3,14 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+
+#include "stereo_occupancy/cpu_features.h"
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
 // The first pass in AVX2's eight lanes where the CPU has them (chosen at
-// run time; the same operations lane for lane as SSE2's).
+// run time, avx2Enabled(); the same results lane for lane as SSE2's, with
+// the quiet forms of its compares).
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__linux__)
 #define STEREO_OCCUPANCY_AVX2_PYRAMID 1
 #include <immintrin.h>
@@ -112,12 +115,6 @@ reduceLanes(const __m128 (&ok)[4], const __m128 (&valid_d)[4], __m128 invalid, c
 #endif
 
 #if STEREO_OCCUPANCY_AVX2_PYRAMID
-/// True if the CPU runs AVX2 (asked once).
-bool cpuHasAvx2() {
-  static const bool has = __builtin_cpu_supports("avx2");
-  return has;
-}
-
 /// reduceLanes() for eight blocks (sixteen columns of both rows) in AVX2
 /// lanes. The pairs' shuffle works within each half of the registers, which
 /// leaves the blocks in the order 0, 1, 4, 5, 2, 3, 6, 7: one permute of
@@ -185,7 +182,7 @@ void sanitiseAndReduceRow(const float* in0, const float* in1, int cols, StereoCa
   if constexpr (kMax) max_rows = rowPair(*max_levels, y, two_rows);
   int x = 0;
 #if STEREO_OCCUPANCY_AVX2_PYRAMID
-  if (cpuHasAvx2())
+  if (avx2Enabled())
     x = sanitiseAndReduceBlocks8<kMin, kMax>(in0, in1, cols, valid, kMin ? min_levels->invalid : 0.0f,
                                              kMax ? max_levels->invalid : 0.0f, min_rows, max_rows, x);
 #endif

@@ -7,12 +7,14 @@
 #include <stdexcept>
 #include <vector>
 
-// The encoding's masks in AVX2's eight lanes where the CPU has them: one
-// function for each, chosen once (the loader's ifunc, as target_clones).
+// The encoding's masks in AVX2's eight lanes where the CPU has them
+// (chosen at run time, avx2Enabled()).
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__linux__)
 #define STEREO_OCCUPANCY_AVX2_MASKS 1
 #include <immintrin.h>
 #endif
+
+#include "stereo_occupancy/cpu_features.h"
 
 namespace stereo_occupancy {
 
@@ -63,18 +65,10 @@ inline bool informative(float v) { return v != LocalGrid::kUnknown && v != 0.0f;
 /// Blocks whose masks masksOf() computes in one call (a stack array).
 constexpr size_t kMaskBatch = 256;
 
-/// informationMask() of @p blocks whole blocks from @p cells.
 #if STEREO_OCCUPANCY_AVX2_MASKS
-__attribute__((target("default")))
-#endif
-void masksOf(const float* cells, size_t blocks, uint16_t* masks) {
-  for (size_t b = 0; b < blocks; ++b) masks[b] = static_cast<uint16_t>(informationMask(cells + b * kInformationBlock));
-}
-
-#if STEREO_OCCUPANCY_AVX2_MASKS
-/// The same, eight cells a lane group: the same compares (not equal,
+/// masksOf() eight cells a lane group: the same compares (not equal,
 /// unordered: NaN holds information, as in _mm_cmpneq_ps).
-__attribute__((target("avx2"))) void masksOf(const float* cells, size_t blocks, uint16_t* masks) {
+__attribute__((target("avx2"))) void masksOfAvx2(const float* cells, size_t blocks, uint16_t* masks) {
   static_assert(kInformationBlock == 16, "two groups of eight lanes");
   const __m256 unknown = _mm256_set1_ps(LocalGrid::kUnknown), zero = _mm256_setzero_ps();
   for (size_t b = 0; b < blocks; ++b) {
@@ -88,6 +82,17 @@ __attribute__((target("avx2"))) void masksOf(const float* cells, size_t blocks, 
   }
 }
 #endif
+
+/// informationMask() of @p blocks whole blocks from @p cells.
+void masksOf(const float* cells, size_t blocks, uint16_t* masks) {
+#if STEREO_OCCUPANCY_AVX2_MASKS
+  if (avx2Enabled()) {
+    masksOfAvx2(cells, blocks, masks);
+    return;
+  }
+#endif
+  for (size_t b = 0; b < blocks; ++b) masks[b] = static_cast<uint16_t>(informationMask(cells + b * kInformationBlock));
+}
 
 /// The runs of informative cells in [begin, end) of @p data (begin a
 /// multiple of kInformationBlock), appended to @p start and @p length;

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <random>
 
+#include "avx2_paths.h"
 #include "stereo_occupancy/disparity_pyramid.h"
 
 using namespace stereo_occupancy;
@@ -82,15 +83,19 @@ TEST(DisparityPyramid, WorkersBuildTheSamePyramid) {
 }
 
 // Both pyramids of one image in one pass: the same levels, bit for bit, as
-// two builds, alone and on a pool's workers.
+// two builds, alone and on a pool's workers; the two builds without the
+// AVX2 pass, the one pass with it where the CPU has it.
 TEST(DisparityPyramid, BothPyramidsInOnePassAreTheTwoBuilds) {
+  const AllowAvx2AtEnd restore;
   const StereoCameraModel cam{StereoCameraConfig()};
   for (auto size : {cv::Size(640, 480), cv::Size(641, 479), cv::Size(37, 97), cv::Size(9, 31)}) {
     const cv::Mat img = randomDisparity(size.width, size.height, 7);
     for (int top : {0, 1, 5}) {
       DisparityPyramid min_alone, max_alone;
+      allowAvx2(false);  // the SSE2 (or NEON, scalar) pass, against the AVX2 one below where the CPU has it
       min_alone.build(img, cam, PyramidType::kMinDisparity, top);
       max_alone.build(img, cam, PyramidType::kMaxDisparity, top);
+      allowAvx2(true);
       for (unsigned threads : {1u, 2u, 3u}) {
         WorkerPool pool(threads);
         DisparityPyramid min_both, max_both;
@@ -113,7 +118,8 @@ TEST(DisparityPyramid, BothPyramidsInOnePassAreTheTwoBuilds) {
   }
 }
 
-TEST(DisparityPyramid, Level0IsSanitised) {
+namespace {
+void expectLevel0Sanitised() {
   const StereoCameraModel cam{StereoCameraConfig()};  // near disparity 420 px
   // Sizes that end in the vectorised part of a row and in its scalar rest
   // (25: eight blocks in AVX2 lanes where the CPU has them, four in SSE2's,
@@ -141,6 +147,17 @@ TEST(DisparityPyramid, Level0IsSanitised) {
       expectReductionExact(min_pyr, true);
       expectReductionExact(max_pyr, false);
     }
+  }
+}
+
+}  // namespace
+
+TEST(DisparityPyramid, Level0IsSanitised) {
+  const AllowAvx2AtEnd restore;
+  for (const bool avx2 : {true, false}) {
+    SCOPED_TRACE(avx2 ? "AVX2 where the CPU has it" : "without AVX2");
+    allowAvx2(avx2);
+    expectLevel0Sanitised();
   }
 }
 

@@ -183,7 +183,8 @@ TEST(FusionCache, BatchesOnAPoolAreUpdateNodesTree) {
 // cells) and whose runs go on from one row to the next, with values that flip cells
 // between free and occupied, exact zeros, and values that reach the
 // clamping bounds: after each, the tree is updateNode's over the same adds,
-// and the class changes are each cell's, from its value before and after.
+// and the class changes are each cell's, from its value before and after
+// (one pass without a log, one whose log overflows).
 TEST(FusionCache, StretchesTakeEachCellsUpdateAndClassChange) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> moderate(-1.5f, 1.5f);
@@ -192,7 +193,6 @@ TEST(FusionCache, StretchesTakeEachCellsUpdateAndClassChange) {
   AccumulatingOcTree tree(0.25);
   FusionCache cache;
   ClassChangeLog log;
-  log.max_changes = 1 << 20;
   const float occupied = plain.getOccupancyThresLog();
   using Change = std::tuple<int, int, int, int>;  // cell, class
   size_t flips = 0, clamped = 0;
@@ -220,14 +220,26 @@ TEST(FusionCache, StretchesTakeEachCellsUpdateAndClassChange) {
       flips += was != CellClass::kUnknown;
       expected.emplace_back(g.x(), g.y(), g.z(), static_cast<int>(is));
     });
-    log.changes.clear();
     std::vector<Eigen::Vector3i> touched;
+    if (pass == 3) {  // no log: the same values
+      cache.add(update, &tree, offset, nullptr, &touched);
+      continue;
+    }
+    log.changes.clear();
+    log.max_changes = pass == 5 ? 10 : 1 << 20;  // the last pass's log overflows
     cache.add(update, &tree, offset, &log, &touched);
     std::vector<Change> changes;
     for (const CellClassChange& c : log.changes)
       changes.emplace_back(c.cell.x(), c.cell.y(), c.cell.z(), static_cast<int>(c.now));
     std::sort(expected.begin(), expected.end());
     std::sort(changes.begin(), changes.end());
+    if (pass == 5) {  // the overflow said, and no more than ten changes kept, each a real one
+      EXPECT_TRUE(log.overflowed);
+      EXPECT_LE(changes.size(), 10u);
+      EXPECT_TRUE(std::includes(expected.begin(), expected.end(), changes.begin(), changes.end()));
+      continue;
+    }
+    EXPECT_FALSE(log.overflowed);
     ASSERT_EQ(changes, expected) << "pass " << pass;
   }
   EXPECT_GT(flips, 100u);    // cells that went from free to occupied or back

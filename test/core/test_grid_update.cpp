@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "avx2_paths.h"
 #include "stereo_occupancy/grid_update.h"
 
 using namespace stereo_occupancy;
@@ -108,48 +109,63 @@ TEST(GridUpdate, EncodingOnAPoolEqualsOneScan) {
 
 // The runs are the maximal stretches of informative cells (known, not 0),
 // cell for cell as a plain scan finds them: short runs and gaps of every
-// length around the 16-cell blocks the encoding reads at once, zeros inside
-// known stretches, and grids whose size is no multiple of 16. Every other
-// round has long stretches with few zeros, so that four blocks at once are
-// all empty or all in a run, across the batches of blocks whose masks the
-// encoding computes together (4096 cells).
+// length around the 16-cell blocks the encoding reads at once, zeros (also
+// -0) inside known stretches, and grids whose size is no multiple of 16.
+// Every other round has long stretches with few zeros, so that four blocks
+// at once are all empty or all in a run, across the batches of blocks whose
+// masks the encoding computes together (4096 cells); the last round has NaN
+// and +inf cells, which hold information (an update with them is refused
+// later, by isConsistent()). With the AVX2 paths (where the CPU has them)
+// and without.
 TEST(GridUpdate, RunsAreThoseOfACellByCellScan) {
-  std::mt19937 rng(11);
-  std::uniform_int_distribution<int> short_length(1, 40), long_length(60, 400);
-  std::uniform_real_distribution<float> value(-2.0f, 3.0f);
-  for (const Eigen::Vector3i& size : {Eigen::Vector3i(37, 11, 5), Eigen::Vector3i(16, 4, 2), Eigen::Vector3i(7, 1, 1),
-                                      Eigen::Vector3i(200, 9, 3), Eigen::Vector3i(257, 37, 3)}) {
-    for (int round = 0; round < 20; ++round) {
-      LocalGrid grid;
-      grid.reset(Eigen::Vector3i::Zero(), size, 0.25);
-      float* cells = grid.data();
-      const size_t n = grid.numCells();
-      const bool long_stretches = round % 2 == 1;
-      const unsigned zero_one_in = long_stretches ? 500 : 9;
-      for (size_t i = 0; i < n;) {  // alternating stretches: known (some zeros) and unknown
-        const int stretch = long_stretches ? long_length(rng) : short_length(rng);
-        const size_t end = std::min(n, i + static_cast<size_t>(stretch));
-        const bool known = rng() % 2 == 0;
-        for (; i < end; ++i) cells[i] = !known ? LocalGrid::kUnknown : rng() % zero_one_in == 0 ? 0.0f : value(rng);
-      }
-      std::vector<uint32_t> start, run_length;
-      for (size_t i = 0; i < n; ++i) {
-        const bool informative = cells[i] != LocalGrid::kUnknown && cells[i] != 0.0f;
-        const bool continues = !start.empty() && start.back() + run_length.back() == i;
-        if (!informative) continue;
-        if (continues) {
-          ++run_length.back();
-        } else {
-          start.push_back(static_cast<uint32_t>(i));
-          run_length.push_back(1);
+  const AllowAvx2AtEnd restore;
+  for (const bool avx2 : {true, false}) {
+    allowAvx2(avx2);
+    std::mt19937 rng(11);
+    std::uniform_int_distribution<int> short_length(1, 40), long_length(60, 400);
+    std::uniform_real_distribution<float> value(-2.0f, 3.0f);
+    for (const Eigen::Vector3i& size : {Eigen::Vector3i(37, 11, 5), Eigen::Vector3i(16, 4, 2), Eigen::Vector3i(7, 1, 1),
+                                        Eigen::Vector3i(200, 9, 3), Eigen::Vector3i(257, 37, 3)}) {
+      for (int round = 0; round < 20; ++round) {
+        LocalGrid grid;
+        grid.reset(Eigen::Vector3i::Zero(), size, 0.25);
+        float* cells = grid.data();
+        const size_t n = grid.numCells();
+        const bool long_stretches = round % 2 == 1, non_finite = round == 19;
+        const unsigned zero_one_in = long_stretches ? 500 : 9;
+        auto known = [&]() {
+          const unsigned kind = rng() % zero_one_in;
+          if (kind == 0) return rng() % 2 ? 0.0f : -0.0f;
+          if (non_finite && kind == 1) return rng() % 2 ? std::numeric_limits<float>::quiet_NaN() : INFINITY;
+          return value(rng);
+        };
+        for (size_t i = 0; i < n;) {  // alternating stretches: known (some zeros) and unknown
+          const int stretch = long_stretches ? long_length(rng) : short_length(rng);
+          const size_t end = std::min(n, i + static_cast<size_t>(stretch));
+          const bool is_known = rng() % 2 == 0;
+          for (; i < end; ++i) cells[i] = is_known ? known() : LocalGrid::kUnknown;
         }
+        std::vector<uint32_t> start, run_length;
+        bool finite = true;
+        for (size_t i = 0; i < n; ++i) {
+          const bool informative = cells[i] != LocalGrid::kUnknown && cells[i] != 0.0f;  // NaN: informative
+          finite &= !informative || std::isfinite(cells[i]);
+          const bool continues = !start.empty() && start.back() + run_length.back() == i;
+          if (!informative) continue;
+          if (continues) {
+            ++run_length.back();
+          } else {
+            start.push_back(static_cast<uint32_t>(i));
+            run_length.push_back(1);
+          }
+        }
+        GridUpdate u;
+        encodeGridUpdate(grid, Eigen::Vector3d::Zero(), &u);
+        ASSERT_EQ(u.run_start, start) << size.transpose() << ", round " << round << ", avx2 " << avx2;
+        ASSERT_EQ(u.run_length, run_length);
+        std::string why;
+        EXPECT_EQ(u.isConsistent(&why), finite) << why;
       }
-      GridUpdate u;
-      encodeGridUpdate(grid, Eigen::Vector3d::Zero(), &u);
-      ASSERT_EQ(u.run_start, start) << size.transpose() << ", round " << round;
-      ASSERT_EQ(u.run_length, run_length);
-      std::string why;
-      EXPECT_TRUE(u.isConsistent(&why)) << why;
     }
   }
 }
