@@ -40,7 +40,8 @@ struct Thresholds {
 /// c in [0, n): OccupancyOcTreeBase::updateNodeLogOdds() (a new leaf starts
 /// at 0) with updateNode's early return (a leaf clamped the way of the
 /// update takes none). Bit c of the result: cell c changed; of
-/// @p class_changed: its class changed too (a new leaf's always does).
+/// @p class_changed (null: not asked): its class changed too (a new leaf's
+/// always does).
 uint32_t updateStretch(const float* u, float* cells, int n, const Thresholds& t, uint32_t* class_changed) {
   static_assert(FusionCache::kEdge <= 32, "a stretch's cells are the bits of a 32-bit mask");
   uint32_t taken = 0;
@@ -55,7 +56,7 @@ uint32_t updateStretch(const float* u, float* cells, int n, const Thresholds& t,
       value = t.hi;
     cells[c] = value;
     taken |= uint32_t{1} << c;
-    if (created || classOfLogOdds(old, t.occupied) != classOfLogOdds(value, t.occupied))
+    if (class_changed && (created || classOfLogOdds(old, t.occupied) != classOfLogOdds(value, t.occupied)))
       *class_changed |= uint32_t{1} << c;
   }
   return taken;
@@ -281,11 +282,11 @@ void FusionCache::addRowOfBlocks(const GridUpdateView& update, const Accumulatin
         const int base = cx + kEdge * (cy + kEdge * cz);
         float* const cells = block->log_odds.data() + base;
         uint32_t class_changed = 0;
-        const uint32_t taken =
-            updateStretch(&update.log_odds[v], cells, static_cast<int>(stretch), thresholds, &class_changed);
+        const uint32_t taken = updateStretch(&update.log_odds[v], cells, static_cast<int>(stretch), thresholds,
+                                             record ? &class_changed : nullptr);
         block->changed[static_cast<size_t>(base) >> 6] |= uint64_t{taken} << (base & 63);
         const bool changed_any = taken != 0;
-        for (uint32_t bits = record ? class_changed : 0u; bits != 0; bits &= bits - 1) {
+        for (uint32_t bits = class_changed; bits != 0; bits &= bits - 1) {
           const int c = __builtin_ctz(bits);
           if (out->changes.size() >= max_changes) {
             out->overflowed = true;
