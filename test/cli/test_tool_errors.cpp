@@ -111,7 +111,8 @@ TEST(ToolErrors, BenchmarksAndFigures) {
        performance + " --scenario posts --frame 100000", performance + " --flight mars", performance + " --pace-ms 100",
        performance + " --flight posts --pace-ms -1", performance + " --frobnicate",
        performance + " --flight posts --thread-rounds 2", performance + " --stages --scenario posts --thread-rounds 2",
-       performance + " --stages --flight posts --thread-rounds 0"},
+       performance + " --stages --flight posts --thread-rounds 0", performance + " --flight posts --blank",
+       performance + " --stages --flight posts --thread-rounds 2 --blank"},
       2);
   expectError("make_figures", {figures + " a b", figures + " --frobnicate"}, 2);
   expectError("make_figures", {figures + " /nonexistent/dir"}, 1);

@@ -34,10 +34,12 @@ namespace {
 
 const char* kUsage =
     "usage: load_test [--width W --height H] [--rate HZ] [--duration S] [--frames N] [--manager NAME]\n"
-    "                 [--disparity TOPIC] [--update TOPIC] [--world-frame F]\n"
+    "                 [--disparity TOPIC] [--update TOPIC] [--world-frame F] [--blank]\n"
     "Publishes the 'posts' flight's disparity images (rendered at W x H, f scaled with W) and their\n"
     "poses on /tf at HZ for S seconds to the running nodelets, and prints latency (image stamp ->\n"
     "occupancy update received), images mapped and dropped, and the manager's resident memory.\n"
+    "--blank: images of the same size without a match (every disparity invalid): the mapper draws\n"
+    "nothing, so the latency is the path's floor (transport, tf, input checks, pyramids, messages).\n"
     "Defaults: 640 x 480, 30 Hz, 60 s, 40 distinct frames, manager stereo_occupancy_manager.\n";
 
 /// Resident memory of process @p pid [MiB], or -1.
@@ -75,6 +77,7 @@ double percentile(std::vector<double> v, double q) {
 
 int run(int argc, char** argv) {
   int width = 640, height = 480, frames = 40;
+  bool blank = false;
   double rate_hz = 30.0, duration_s = 60.0;
   std::string manager = "stereo_occupancy_manager", disparity_topic = "/stereo/disparity",
               update_topic = "/occupancy_update", world_frame = "map";
@@ -103,6 +106,8 @@ int run(int argc, char** argv) {
       update_topic = tools::nextValue(argc, argv, &i);
     } else if (a == "--world-frame") {
       world_frame = tools::nextValue(argc, argv, &i);
+    } else if (a == "--blank") {
+      blank = true;
     } else {
       throw tools::UsageError("unknown option '" + a + "'");
     }
@@ -123,7 +128,8 @@ int run(int argc, char** argv) {
   std::cerr << "load_test: rendering " << frames << " frames of " << width << "x" << height << "..." << std::flush;
   for (size_t k = 0; k < static_cast<size_t>(frames); ++k) {
     const size_t i = (k * step) % flight.T_W_B.size();
-    const cv::Mat d = so::renderStereoFrame(flight, i, 1);
+    cv::Mat d = so::renderStereoFrame(flight, i, 1);
+    if (blank) d.setTo(-1.0f);  // no match anywhere (stereo_image_proc's invalid value)
     std_msgs::Header header;
     header.frame_id = "camera_optical";
     stereo_msgs::DisparityImage m;

@@ -133,15 +133,17 @@ int flightPath(const std::string& scenario_name, long pace_ms, int threads, bool
 /// The whole path as the nodelets run it, image in to map fused
 /// (WholePath), stage by stage (stage_times.h), frame @p frames[k] of
 /// @p scenario for each k. The messages are made beforehand (a camera
-/// driver's work).
+/// driver's work). With @p blank every pixel is without a match: what
+/// the path costs an image that draws nothing.
 int wholePath(const so::FlightScenario& scenario, const std::vector<size_t>& frames, const std::string& title,
-              int threads, long pace_ms) {
+              int threads, long pace_ms, bool blank) {
   so::tools::WholePath path(threads);
   std::vector<stereo_msgs::DisparityImageConstPtr> images;
   std::map<size_t, cv::Mat> rendered;  // a frame repeated is rendered once
   for (size_t k = 0; k < frames.size(); ++k) {
     cv::Mat& disparity = rendered[frames[k]];
     if (disparity.empty()) disparity = so::renderStereoFrame(scenario, frames[k], 1);
+    if (blank) disparity.setTo(-1.0f);  // no match (stereo_image_proc's invalid value)
     images.push_back(path.prepare(scenario, frames[k], disparity, k));
   }
   std::vector<std::vector<double>> stage_ms(so::kPathStages);
@@ -162,7 +164,7 @@ int wholePath(const so::FlightScenario& scenario, const std::vector<size_t>& fra
             << so::toString(path.mapper().drawing.algorithm) << ", " << path.mapper().drawing.resolution_m
             << " m cells), " << threadsText(threads)
             << (pace_ms > 0 ? "; a pause of " + std::to_string(pace_ms) + " ms before each frame" : std::string())
-            << "; " << fused << " of " << images.size()
+            << (blank ? "; every pixel without a match" : "") << "; " << fused << " of " << images.size()
             << " images fused. Per frame [ms]; share: of the mean whole path.\n\n"
                "| stage | mean | median | p99 | max | share |\n|---|---:|---:|---:|---:|---:|\n";
   auto row = [&](const std::string& name, const std::vector<double>& ms) {
@@ -306,7 +308,7 @@ int run(int argc, char** argv) {
   std::string only, scenario_name, flight;
   long frame = 0, pace_ms = 0;
   int threads = 1;
-  bool spans = true, stages = false;
+  bool spans = true, stages = false, blank = false;
   int thread_rounds = 0;        // --thread-rounds: one thread against two, with the ceiling
   bool record_changes = false;  // the fusion records the cells whose class it changed (the distance field's feed)
   std::map<std::string, double> model_values;  // the default stage's sensor model, by name
@@ -332,6 +334,8 @@ int run(int argc, char** argv) {
       spans = false;
     } else if (a == "--stages") {
       stages = true;
+    } else if (a == "--blank") {
+      blank = true;
     } else if (a == "--thread-rounds") {
       thread_rounds = static_cast<int>(so::tools::parseWhole(a, so::tools::nextValue(argc, argv, &i), 1, 1000));
     } else if (a == "--model") {
@@ -343,6 +347,7 @@ int run(int argc, char** argv) {
           << "usage: performance [--repeat N] [--only STAGE] [--scenario NAME [--frame K]] | --flight NAME "
              "[--pace-ms MS]; either with [--threads N]; [--model NAME=VALUE]... [--no-spans] "
              "[--record-changes] | --stages (--scenario NAME [--frame K] | --flight NAME [--pace-ms MS]) [--threads N] "
+             "[--blank] "
              "| --stages "
              "--flight NAME --thread-rounds R\n"
              "Times the mapper's stages on the Table I frame (or frame K of a simulated flight, with its "
@@ -360,6 +365,8 @@ int run(int argc, char** argv) {
              "--stages: the whole path as the nodelets run it (FrameMapping, MapFusion, the defaults), "
              "image in to map fused, stage by stage, on frame K repeated N times or on every frame of the "
              "flight.\n"
+             "--blank (with --stages): every pixel of the images without a match: what the path costs an image "
+             "that draws nothing.\n"
              "--thread-rounds R (with --stages --flight NAME): R rounds of the whole path over the flight on "
              "one thread, on two, and two one-thread passes at once (the machine's ceiling for two cores), "
              "each into a new map; prints each round's means, two threads ÷ one and the ceiling, whether "
@@ -374,6 +381,8 @@ int run(int argc, char** argv) {
   }
   if (pace_ms > 0 && flight.empty()) throw so::tools::UsageError("--pace-ms needs --flight");
   if (pace_ms > 0 && thread_rounds > 0) throw so::tools::UsageError("--pace-ms does not go with --thread-rounds");
+  if (blank && (!stages || thread_rounds > 0))
+    throw so::tools::UsageError("--blank needs --stages (without --thread-rounds)");
   if (thread_rounds > 0) {
     if (!stages || flight.empty()) throw so::tools::UsageError("--thread-rounds needs --stages --flight NAME");
     return threadRounds(flight, thread_rounds);
@@ -386,7 +395,7 @@ int run(int argc, char** argv) {
       std::vector<size_t> frames(scenario.T_W_B.size());
       for (size_t k = 0; k < frames.size(); ++k) frames[k] = k;
       return wholePath(scenario, frames, "Flight '" + flight + "', " + std::to_string(frames.size()) + " frames",
-                       threads, pace_ms);
+                       threads, pace_ms, blank);
     }
     const so::FlightScenario scenario = so::tools::scenarioNamed(scenario_name);
     if (frame >= static_cast<long>(scenario.T_W_B.size()))
@@ -394,7 +403,7 @@ int run(int argc, char** argv) {
     return wholePath(
         scenario, std::vector<size_t>(static_cast<size_t>(repeat), static_cast<size_t>(frame)),
         "Frame " + std::to_string(frame) + " of flight '" + scenario_name + "', " + std::to_string(repeat) + " times",
-        threads, 0);
+        threads, 0, blank);
   }
   {  // a wrong --model before any stage runs
     so::DrawingConfig checked = so::DrawingConfig::mapperDefaults();
