@@ -210,6 +210,7 @@ class AccumulatingOcTree : public octomap::OcTree {
   /// node's child array only in pruneNode(), so each level is made prunable.
   void collapse(octomap::OcTreeNode* node);
   /// The node of @p key at @p depth; null if there is none, or a coarser leaf holds the key.
+  const octomap::OcTreeNode* nodeOnPath(const octomap::OcTreeKey& key, unsigned depth) const;
   octomap::OcTreeNode* nodeOnPath(const octomap::OcTreeKey& key, unsigned depth);
   /// pruneBelow()'s merges with @p before_merge, below @p node (lowest key @p lo, at @p depth).
   size_t mergeUp(octomap::OcTreeNode* node, const octomap::OcTreeKey& lo, unsigned depth, unsigned deepest,

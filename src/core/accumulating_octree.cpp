@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <utility>
 #include <vector>
 
 namespace stereo_occupancy {
@@ -56,15 +57,20 @@ bool AccumulatingOcTree::dropNode(const octomap::OcTreeKey& key, unsigned depth)
   return true;
 }
 
-octomap::OcTreeNode* AccumulatingOcTree::nodeOnPath(const octomap::OcTreeKey& key, unsigned depth) {
+const octomap::OcTreeNode* AccumulatingOcTree::nodeOnPath(const octomap::OcTreeKey& key, unsigned depth) const {
   if (!root || depth > tree_depth) return nullptr;
-  octomap::OcTreeNode* node = root;
+  const octomap::OcTreeNode* node = root;
   for (unsigned d = 0; d < depth; ++d) {
     const unsigned pos = octomap::computeChildIdx(key, static_cast<int>(tree_depth - 1 - d));
     if (!nodeChildExists(node, pos)) return nullptr;  // nothing there, or a coarser leaf
     node = getNodeChild(node, pos);
   }
   return node;
+}
+
+octomap::OcTreeNode* AccumulatingOcTree::nodeOnPath(const octomap::OcTreeKey& key, unsigned depth) {
+  // One walk for both: the nodes are this (non-const) tree's own.
+  return const_cast<octomap::OcTreeNode*>(std::as_const(*this).nodeOnPath(key, depth));
 }
 
 size_t AccumulatingOcTree::pruneBelow(const octomap::OcTreeKey& key, unsigned depth, unsigned deepest) {
@@ -112,13 +118,9 @@ size_t AccumulatingOcTree::mergeUp(octomap::OcTreeNode* node, const octomap::OcT
 std::vector<octomap::OcTreeKey> AccumulatingOcTree::innerNodesBelow(const octomap::OcTreeKey& key, unsigned depth,
                                                                     unsigned part_depth) const {
   std::vector<octomap::OcTreeKey> keys;
-  if (!root || depth > part_depth || part_depth >= tree_depth) return keys;
-  const octomap::OcTreeNode* node = root;
-  for (unsigned d = 0; d < depth; ++d) {
-    const unsigned pos = octomap::computeChildIdx(key, static_cast<int>(tree_depth - 1 - d));
-    if (!nodeChildExists(node, pos)) return keys;  // nothing there, or a coarser leaf
-    node = getNodeChild(node, pos);
-  }
+  if (depth > part_depth || part_depth >= tree_depth) return keys;
+  const octomap::OcTreeNode* node = nodeOnPath(key, depth);
+  if (!node) return keys;  // nothing there, or a coarser leaf
   // Depth first, children in index order; a child's key sets its level's bit.
   struct Visit {
     const octomap::OcTreeNode* node;
