@@ -619,9 +619,10 @@ STEREO_OCCUPANCY_INLINE uint64_t drawInnerCells(float* data, const InnerSlabs& i
     if (profile.step_sample >= 0) {  // the surface profile: most of its window is free space
       for (; k < k_peak; ++k, x += sample_step, cursor->advance())
         drawCell(data, cursor->index(), profile.stepSample(std::max(x, 0.0f)));
+    } else {
+      for (; k < k_peak; ++k, x += sample_step, cursor->advance())
+        drawCell(data, cursor->index(), profile.sample(std::max(x, 0.0f)));
     }
-    for (; k < k_peak; ++k, x += sample_step, cursor->advance())
-      drawCell(data, cursor->index(), profile.sample(std::max(x, 0.0f)));
     const float peak = profile.sample((-profile.row_origin_m) * profile.samples_per_m);
     for (; k < k_fall; ++k, cursor->advance()) drawCell(data, cursor->index(), peak);
     x = sampleAt(k, -half_cell);
