@@ -42,8 +42,8 @@ struct FlightTimes {
   std::vector<double> ours, wavemap, octomap, wavemap_ratio, octomap_ratio;
   std::vector<double> paper;  ///< the paper's line_pyramid drawing alone (grid, pyramids, lines)
   /// Frames where the paper's drawing alone takes longer than wavemap's
-  /// time ÷ 5 (OctoMap's ÷ 50): no faster form of the paper's algorithm
-  /// reaches the goal there, even with encoding and fusion free.
+  /// time ÷ 5 (OctoMap's ÷ 50): with this drawing, no speed-up of the
+  /// stages after it reaches the goal there, even with them free.
   size_t paper_over_wavemap_goal = 0, paper_over_octomap_goal = 0;
 };
 
@@ -140,8 +140,8 @@ int run(int argc, char** argv) {
                    "the flight (default: every flight), one method after the other. --per-frame writes each "
                    "frame's times (flight, frame, ours_ms, wavemap_ms, octomap_ms, paper_ms) as CSV. The paper's "
                    "line_pyramid drawing alone (no encoding, no fusion) is timed too: the frames where it takes "
-                   "longer than wavemap ÷ 5 (OctoMap ÷ 50) are those no faster form of the paper's algorithm "
-                   "brings to issue 48's goals.\n";
+                   "longer than wavemap ÷ 5 (OctoMap ÷ 50) are those where, with this drawing, no speed-up of the "
+                   "stages after it reaches issue 48's goals.\n";
       return 0;
     } else {
       throw so::tools::UsageError("unknown option '" + a + "'");
