@@ -708,7 +708,8 @@ uint64_t LineDrawer::drawPixelHits(const RayGrid& grid, const cv::Mat& disparity
     const float* row = disparity.ptr<float>(y);
     for (int x = 0; x < disparity.cols; x += PixelHitRows::kChunk) {
       const int n = std::min(PixelHitRows::kChunk, disparity.cols - x);
-      if (!keying.anyMeasured(row, x, n)) continue;  // sky, no match
+      // Sky or no match; the chunk's first pixel answers for most chunks.
+      if (!keying.measured(row[x]) && !keying.anyMeasured(row, x, n)) continue;
       if (!keying.keysInFloat()) {
         for (int k = 0; k < n; ++k)
           if (keying.measured(row[x + k])) ++pixels, drawExact(x + k, y, row[x + k]);
