@@ -20,8 +20,8 @@
 #include <string>
 #include <vector>
 
+#include "drawing_benchmark.h"
 #include "scenario_support.h"
-#include "stereo_occupancy/disparity_drawer.h"
 #include "stereo_occupancy/local_grid.h"
 #include "stereo_occupancy/sim/flight_simulation.h"
 #include "stereo_occupancy/sim/wavemap_integrator.h"
@@ -90,11 +90,8 @@ FlightTimes timeFlight(const so::FlightScenario& scenario) {
         scenario.camera.max_range_m, /*lazy_eval=*/false, /*discretize=*/true);
     t.octomap.push_back(msSince(t0));
   }
-  so::DrawingConfig paper_config;  // the paper's profile and pyramids
-  paper_config.algorithm = so::DrawingAlgorithm::kLinePyramid;
-  paper_config.resolution_m = cell_m;
-  paper_config.threads = 1;
-  so::DisparityDrawer paper(scenario.camera, paper_config);
+  // The paper's profile and pyramids.
+  so::DisparityDrawer paper(scenario.camera, so::tools::drawingConfig(so::DrawingAlgorithm::kLinePyramid, cell_m, 1));
   so::LocalGrid grid;
   for (size_t i = 0; i < disparities.size(); ++i) {
     const auto t0 = Clock::now();

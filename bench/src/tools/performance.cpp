@@ -142,8 +142,10 @@ int wholePath(const so::FlightScenario& scenario, const std::vector<size_t>& fra
   std::map<size_t, cv::Mat> rendered;  // a frame repeated is rendered once
   for (size_t k = 0; k < frames.size(); ++k) {
     cv::Mat& disparity = rendered[frames[k]];
-    if (disparity.empty()) disparity = so::renderStereoFrame(scenario, frames[k], 1);
-    if (blank) disparity.setTo(-1.0f);  // no match (stereo_image_proc's invalid value)
+    if (disparity.empty()) {
+      disparity = so::renderStereoFrame(scenario, frames[k], 1);
+      if (blank) disparity.setTo(-1.0f);  // no match (stereo_image_proc's invalid value)
+    }
     images.push_back(path.prepare(scenario, frames[k], disparity, k));
   }
   std::vector<std::vector<double>> stage_ms(so::kPathStages);
